@@ -1,0 +1,35 @@
+# Every target sets itself up: system packages, a virtual environment, arapp.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+ARAPP  := $(VENV)/bin/arapp
+STAMP  := $(VENV)/.arapp-installed
+
+export PYOPENGL_PLATFORM ?= egl
+export QT_QPA_PLATFORM ?= offscreen
+export MPLBACKEND ?= Agg
+
+.PHONY: setup demo test bench clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml constraints.txt scripts/system-deps.sh
+	./scripts/system-deps.sh
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -c constraints.txt -e '.[test]'
+	# pyrender pins PyOpenGL 3.1.0, which cannot use EGL on current Mesa.
+	$(PY) -m pip install -q 'PyOpenGL==3.1.10' 2>&1 | grep -v "dependency conflicts\|pyrender 0.1.45 requires\|resolver does not" || true
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(ARAPP) demo --out out/demo
+
+test: $(STAMP)
+	$(PY) -m pytest -q -p no:cacheprovider tests
+
+bench: $(STAMP)
+	$(PY) benchmarks/run_all.py --out BENCHMARKS.md
+
+clean:
+	rm -rf $(VENV) out

@@ -1,0 +1,5 @@
+import sys
+
+from arapp.cli import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of the `arapp` CLI, one module each (see arapp.cli)."""

@@ -1,0 +1,11 @@
+"""`arapp gui`: not yet implemented."""
+
+HELP = "(not yet implemented)"
+
+
+def add_arguments(parser):
+    pass
+
+
+def run(args):
+    raise RuntimeError("'arapp gui' is not implemented yet")

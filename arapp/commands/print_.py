@@ -1,0 +1,11 @@
+"""`arapp print`: not yet implemented."""
+
+HELP = "(not yet implemented)"
+
+
+def add_arguments(parser):
+    pass
+
+
+def run(args):
+    raise RuntimeError("'arapp print' is not implemented yet")

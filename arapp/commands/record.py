@@ -1,0 +1,11 @@
+"""`arapp record`: not yet implemented."""
+
+HELP = "(not yet implemented)"
+
+
+def add_arguments(parser):
+    pass
+
+
+def run(args):
+    raise RuntimeError("'arapp record' is not implemented yet")

@@ -1,0 +1,11 @@
+"""`arapp replay`: not yet implemented."""
+
+HELP = "(not yet implemented)"
+
+
+def add_arguments(parser):
+    pass
+
+
+def run(args):
+    raise RuntimeError("'arapp replay' is not implemented yet")
