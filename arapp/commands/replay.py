@@ -1,11 +1,40 @@
-"""`arapp replay`: not yet implemented."""
+"""`arapp replay`: run the tracking pipeline headless on a recording and write its outputs."""
 
-HELP = "(not yet implemented)"
+HELP = "replay a recording through tracking and rendering; write poses, CSV, overlay video, report"
 
 
 def add_arguments(parser):
-    pass
+    parser.add_argument("recording", help="recording folder (session.json + video)")
+    parser.add_argument("--out", required=True, help="output folder (created)")
+    parser.add_argument("--no-video", action="store_true", help="skip overlay.mp4 (faster)")
+    parser.add_argument("--model", help="model to draw on the anchor (NURBS JSON or STL/OBJ/PLY/3MF/GLB)")
+    parser.add_argument("--size", type=float, help="model size on the anchor in mm (default: the model's own)")
+    parser.add_argument("--mode", default="shaded", choices=["shaded", "wireframe", "isolines", "translucent"],
+                        help="display mode of the model")
+    parser.add_argument("--no-slam", action="store_true", help="markers only, no keypoint tracking")
+    parser.add_argument("--frames", type=int, help="stop after this many frames")
+    parser.add_argument("--printer", help="printer profile JSON (for --toolpaths)")
+    parser.add_argument("--toolpaths", help="G-code whose toolpaths are drawn on the printer bed")
+    parser.add_argument("--layer", type=int, help="with --toolpaths: highlight this layer, dim those below")
 
 
 def run(args):
-    raise RuntimeError("'arapp replay' is not implemented yet")
+    from arapp.replay import ReplayOptions, replay, terminal_progress
+
+    placement = None
+    if args.size is not None:
+        placement = {"size_mm": args.size}
+    opts = ReplayOptions(model=args.model, placement=placement, mode=args.mode, video=not args.no_video,
+                         slam=not args.no_slam, max_frames=args.frames, printer=args.printer,
+                         toolpaths=args.toolpaths, layer=args.layer)
+    if placement is None and args.model:
+        opts.placement = None
+    report = replay(args.recording, args.out, opts, progress=terminal_progress())
+    keys = ["frames", "tracked_fraction", "fps", "ate_rmse_m", "ate_max_m", "rpe_trans_m_per_s", "rpe_rot_deg_per_s"]
+    summary = ", ".join(f"{k} {report[k]:.4g}" for k in keys if isinstance(report.get(k), (int, float)))
+    print(f"replay: {summary}")
+    print(f"replay: wrote {args.out}/poses.tum, tracking.csv, report.json, trajectory.png"
+          + ("" if args.no_video else ", overlay.mp4"))
+    if report.get("source_error"):
+        print(f"replay: warning: {report['source_error']}")
+    return 130 if report.get("interrupted") else 0
