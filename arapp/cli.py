@@ -26,6 +26,7 @@ COMMANDS = [
     ("markers", "markers"),
     ("slice", "slice"),
     ("print", "print_"),
+    ("printer", "printer"),
 ]
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from arapp.placement import Placement, world_from_model
+from arapp.placement import Placement, placement_from_any, world_from_model
 from tracking.camera import Camera
 from tracking.poses import invert
 from tracking.session import AnchorSpec
@@ -75,21 +75,23 @@ class Pipeline:
         self.lines = None
         self.color = None
         self.world_from_model = np.eye(4)
-        self.placement = Placement.from_any(placement)
         self.toolpaths = None  # (line_sets, world_from_bed) set by set_toolpaths
         if model is not None:
             self.set_model(model, placement)
 
     # -- configuration -------------------------------------------------------------
     def set_model(self, model, placement: Placement | dict | None = None) -> None:
-        """Show `model` (an arapp.geometry Model) placed on the world anchor; None hides it."""
+        """Show `model` (an arapp.geometry Model) placed on the world anchor; None hides it.
+
+        placement: replaces the model's own placement (a dict may give only some of
+        size_mm, offset, rotation_deg; the rest stays the model's).
+        """
         self.model = model
         if model is None:
             self.mesh = None
             return
-        if placement is None:
-            placement = getattr(model, "placement", None)
-        self.placement = Placement.from_any(placement)
+        if placement is not None:
+            model.placement = placement_from_any(placement, model.placement)
         self.mesh = model.mesh()
         self.lines = model.lines() if hasattr(model, "lines") else None
         self.color = getattr(model, "color", None)
@@ -99,11 +101,13 @@ class Pipeline:
         """Replace the displayed mesh (e.g. after editing a control point), keeping the placement."""
         self.mesh = mesh
         self.lines = lines
-        self._update_model_matrix()
+        self._update_model_matrix()  # the model's bounds may have changed with its net
 
     def set_placement(self, placement: Placement | dict) -> None:
-        self.placement = Placement.from_any(placement)
-        self._update_model_matrix()
+        """Move/resize the shown model (Placement, or a dict with some of size_mm, offset, rotation_deg)."""
+        if self.model is not None:
+            self.model.placement = placement_from_any(placement, self.model.placement)
+            self._update_model_matrix()
 
     def set_mode(self, mode: str) -> None:
         if mode not in MODES:
@@ -115,9 +119,9 @@ class Pipeline:
         self.toolpaths = (line_sets, world_from_bed)
 
     def _update_model_matrix(self) -> None:
-        if self.mesh is None:
+        if self.model is None:
             return
-        self.world_from_model = world_from_model(self.anchors[0], self.mesh.bounds, self.placement)
+        self.world_from_model = world_from_model(self.anchors[0], self.model)
 
     def reset(self) -> None:
         self.tracker.reset()
@@ -148,7 +152,7 @@ class Pipeline:
                                          color=self.color)
             if pose is not None and self.toolpaths is not None:
                 line_sets, world_from_bed = self.toolpaths
-                out = self.renderer.draw_lines(out, line_sets, invert(pose) @ world_from_bed)
+                out = self.renderer.draw(out, None, invert(pose) @ world_from_bed, line_sets=line_sets)
         t2 = time.perf_counter()
         if self._last_time is not None and t2 > self._last_time:
             inst = 1.0 / (t2 - self._last_time)

@@ -105,7 +105,7 @@ def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | 
             error = getattr(source, "error", None)
             source.close()
     wall = time.perf_counter() - t_start
-    report = _report(recording, out, n, states, wall, interrupted, error)
+    report = _report(recording, out, n, states, wall, interrupted, error, times[-1] if times else None)
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     return report
 
@@ -117,7 +117,8 @@ def _open_writer(path: Path, fps: float, width: int, height: int):
     return writer
 
 
-def _report(recording, out: Path, n: int, states: list[str], wall: float, interrupted: bool, error) -> dict:
+def _report(recording, out: Path, n: int, states: list[str], wall: float, interrupted: bool, error,
+            last_t: float | None) -> dict:
     tracked = sum(s != "lost" for s in states)
     report = {
         "recording": str(recording),
@@ -132,14 +133,19 @@ def _report(recording, out: Path, n: int, states: list[str], wall: float, interr
     gt_path = Path(recording) / "groundtruth.tum"
     est_path = out / "poses.tum"
     if gt_path.is_file():
-        from tracking.evaluation import evaluate_trajectory
+        from tracking.evaluation import evaluate
 
         gt_t, gt_p = read_tum(gt_path)
         est_t, est_p = read_tum(est_path)
-        metrics = evaluate_trajectory(gt_t, gt_p, est_t, est_p)
-        for key in ("ate_rmse_m", "ate_max_m", "rpe_trans_m_per_s", "rpe_rot_deg_per_s"):
-            report[key] = metrics.get(key)
-        report["jitter_m"] = metrics.get("jitter_m")
+        if last_t is not None:  # a partial replay is judged on the frames it covered
+            keep = gt_t <= last_t + 1e-6
+            gt_t, gt_p = gt_t[keep], gt_p[keep]
+        if len(gt_t) and len(est_t):
+            m = evaluate(est_t, est_p, gt_t, gt_p).to_dict()
+            for key in ("ate_rmse_m", "ate_max_m", "rpe_trans_m_per_s", "rpe_rot_deg_per_s", "jitter_m",
+                        "extent_m"):
+                value = m.get(key)
+                report[key] = None if value is None or not np.isfinite(value) else float(value)
         _plot(out / "trajectory.png", gt_t, gt_p, est_t, est_p)
     else:
         est_t, est_p = read_tum(est_path)
@@ -179,14 +185,22 @@ def _plot(path: Path, gt_t, gt_p, est_t, est_p) -> None:
 def terminal_progress(stream=sys.stderr) -> Callable[[int, int], None]:
     """A progress callback drawing `[#####.....] 42/120 frames  12.3 fps` on one terminal line."""
     start = time.perf_counter()
+    tty = hasattr(stream, "isatty") and stream.isatty()
+    shown = [-1]
 
     def show(done: int, total: int) -> None:
+        if not tty:  # a log file gets a line every 10 %, not a carriage-return storm
+            step = int(10 * done / total) if total else 10
+            if step == shown[0] and done < total:
+                return
+            shown[0] = step
         width = 30
         frac = done / total if total else 0.0
         bar = "#" * int(width * frac) + "." * (width - int(width * frac))
         fps = done / max(time.perf_counter() - start, 1e-9)
-        stream.write(f"\r[{bar}] {done}/{total} frames  {fps:5.1f} fps")
-        if done >= total:
+        lead = "\r" if tty else ""
+        stream.write(f"{lead}[{bar}] {done}/{total} frames  {fps:5.1f} fps")
+        if done >= total or not tty:
             stream.write("\n")
         stream.flush()
 

@@ -1,11 +1,234 @@
-"""`arapp print`: not yet implemented."""
+"""`arapp print`: slice a model (or take G-code) and print it over USB serial or OctoPrint."""
 
-HELP = "(not yet implemented)"
+from __future__ import annotations
+
+import os
+import sys
+import threading
+from pathlib import Path
+
+HELP = "print a model or G-code on a Marlin printer (USB serial) or through OctoPrint"
+
+GCODE_SUFFIXES = (".gcode", ".gco", ".g")
 
 
 def add_arguments(parser):
-    pass
+    parser.add_argument("input", nargs="?",
+                        help="G-code file, or a model (JSON model, .stl/.obj/.3mf) to slice first")
+    link = parser.add_argument_group("link (one of)")
+    link.add_argument("--port", help="serial device or pyserial URL (e.g. /dev/ttyUSB0); "
+                                     "default: the printer profile's link.port")
+    link.add_argument("--baud", type=int, default=None, help="baud rate (default: profile's, 115200)")
+    link.add_argument("--octoprint", metavar="URL", help="OctoPrint server, e.g. http://octopi.local")
+    link.add_argument("--api-key-file", metavar="F", help="file holding the OctoPrint API key (mode 600)")
+    link.add_argument("--save-key", metavar="F",
+                      help="store an OctoPrint API key in F with mode 600 (read from $ARAPP_OCTOPRINT_API_KEY, "
+                           "or asked for without echo) and use it")
+    parser.add_argument("--printer", default=None, metavar="PROFILE",
+                        help="printer profile JSON (arapp-printer/1) or shipped name")
+    parser.add_argument("--resume", metavar="JOB.json", help="continue a print whose link dropped (serial only)")
+    parser.add_argument("--job", metavar="JOB.json",
+                        help="where to keep the job state for --resume (default: next to the G-code)")
+    parser.add_argument("-o", "--output", metavar="GCODE",
+                        help="where to write the G-code sliced from a model (default: MODEL.gcode in the "
+                             "current directory)")
+    parser.add_argument("--window", type=int, default=1,
+                        help="serial: unacknowledged lines in flight (default 1)")
+    parser.add_argument("--timeout", type=float, default=10.0,
+                        help="serial: seconds without an answer before a line is sent again (default 10)")
+    sl = parser.add_argument_group("slicing (models only; see arapp slice)")
+    sl.add_argument("--material", default="PLA", type=str.upper, choices=["PLA", "PETG", "ABS", "TPU", "NYLON"])
+    sl.add_argument("--layer-height", type=float, default=0.2, help="mm (default 0.2)")
+    sl.add_argument("--first-layer-height", type=float, default=None, help="mm (default: layer height)")
+    sl.add_argument("--infill", type=float, default=20.0, help="percent (default 20)")
+    sl.add_argument("--pattern", choices=["zigzag", "grid"], default="zigzag")
+    sl.add_argument("--perimeters", type=int, default=2)
+    sl.add_argument("--size", type=float, default=None, metavar="MM", help="largest extent of the part, mm")
+    sl.add_argument("--thickness", type=float, default=2.0, metavar="MM", help="wall for open surfaces, mm")
+    sl.add_argument("--slicer", choices=["builtin", "prusa"], default="builtin")
+    sl.add_argument("--scale-to-fit", action="store_true")
+    sl.add_argument("--z-hop", type=float, default=0.0, metavar="MM")
+    sl.add_argument("--retract", type=float, default=1.0, metavar="MM")
 
 
-def run(args):
-    raise RuntimeError("'arapp print' is not implemented yet")
+def _read_key_interactively() -> str:
+    key = os.environ.get("ARAPP_OCTOPRINT_API_KEY", "")
+    if key:
+        return key
+    if sys.stdin.isatty():
+        import getpass
+
+        return getpass.getpass("OctoPrint API key: ")
+    return sys.stdin.readline()
+
+
+def _slice_model(args, profile) -> Path:
+    """Slice a model with the same options as `arapp slice`; returns the G-code path."""
+    from arapp.commands.slice import load_for_printing
+    from arapp.printing import SliceSettings, slice_mesh
+
+    settings = SliceSettings(
+        material=args.material, layer_height=args.layer_height,
+        first_layer_height=args.first_layer_height if args.first_layer_height is not None else args.layer_height,
+        infill=args.infill, infill_pattern=args.pattern, perimeters=args.perimeters,
+        scale_to_fit=args.scale_to_fit, z_hop=args.z_hop, retract_length=args.retract,
+    )
+    mesh = load_for_printing(args.input, args.size, args.thickness, profile)
+    if args.slicer == "prusa":
+        from arapp.printing.prusa import slice_with_prusa
+
+        result = slice_with_prusa(mesh, settings, profile)
+    else:
+        result = slice_mesh(mesh, settings, profile)
+    out = Path(args.output) if args.output else Path(Path(args.input).stem + ".gcode")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(result.gcode)
+    print(f"sliced {args.input} -> {out} ({result.layers} layers)", file=sys.stderr)
+    return out
+
+
+def format_progress(p) -> str:
+    """One status line: bar, percent, lines, layer, ETA, temperatures, state."""
+    width = 24
+    filled = int(round(width * min(100.0, p.percent) / 100.0))
+    parts = [f"[{'#' * filled}{'.' * (width - filled)}] {p.percent:5.1f}%",
+             f"lines {p.lines_done}/{p.lines_total}"]
+    if p.layer_count:
+        parts.append(f"layer {max(p.layer, 0) + 1}/{p.layer_count}")
+    if p.eta_s is not None:
+        m, s = divmod(int(p.eta_s), 60)
+        h, m = divmod(m, 60)
+        parts.append(f"ETA {h:d}:{m:02d}:{s:02d}")
+    for name in ("T", "T0", "B"):
+        if name in p.temperatures:
+            actual, target = p.temperatures[name]
+            parts.append(f"{name} {actual:.1f}" + (f"/{target:.0f}" if target is not None else ""))
+    parts.append(p.state)
+    return "  ".join(parts)
+
+
+def _progress_writer(stream):
+    tty = stream.isatty()
+    last = {"state": None, "pct": -1}
+
+    def show(p):
+        line = format_progress(p)
+        if tty:
+            print("\r" + line + "\x1b[K", end="", file=stream, flush=True)
+        elif p.state != last["state"] or int(p.percent) // 10 != last["pct"]:
+            # Not a terminal (a log): one line per state change and per 10 %.
+            print(line, file=stream, flush=True)
+        last["state"], last["pct"] = p.state, int(p.percent) // 10
+
+    return show
+
+
+def _run_job(link, job_fn):
+    """Run the job on a worker thread; Ctrl-C cancels the print cleanly."""
+    box = {}
+
+    def work():
+        try:
+            box["state"] = job_fn()
+        except BaseException as exc:  # handed to the main thread, re-raised there
+            box["error"] = exc
+
+    t = threading.Thread(target=work, name="arapp-print", daemon=True)
+    t.start()
+    interrupted = False
+    while t.is_alive():
+        try:
+            t.join()
+        except KeyboardInterrupt:
+            if interrupted:
+                raise
+            interrupted = True
+            print("\ncancelling the print (Ctrl-C again to quit at once)", file=sys.stderr)
+            link.cancel()
+    if "error" in box:
+        raise box["error"]
+    return box["state"], interrupted
+
+
+def run(args) -> int:
+    from arapp.printing.link.job import JobState, Program, resume_commands
+
+    if args.save_key:
+        from arapp.printing.link.octoprint import save_api_key
+
+        path = save_api_key(args.save_key, _read_key_interactively())
+        print(f"API key saved to {path} (mode 600)", file=sys.stderr)
+        if args.api_key_file is None:
+            args.api_key_file = str(path)
+        if args.input is None and args.resume is None:
+            return 0
+    if args.port and args.octoprint:
+        raise ValueError("give either --port (USB serial) or --octoprint URL, not both")
+
+    state = None
+    if args.resume:
+        if args.octoprint:
+            raise ValueError("--resume works with the serial link (--port) only")
+        state = JobState.load(args.resume)
+        gcode_path = Path(args.input or state.gcode)
+        args.job = args.job or args.resume
+    elif args.input is None:
+        raise ValueError("nothing to print: give a G-code file or a model (or --resume JOB.json)")
+    else:
+        gcode_path = Path(args.input)
+
+    profile = None
+    needs_profile = (args.printer is not None or not args.octoprint and not args.port
+                     or gcode_path.suffix.lower() not in GCODE_SUFFIXES)
+    if needs_profile:
+        from arapp.printing import load_profile
+
+        profile = load_profile(args.printer)
+    if gcode_path.suffix.lower() not in GCODE_SUFFIXES:
+        gcode_path = _slice_model(args, profile)
+    if not gcode_path.is_file():
+        raise FileNotFoundError(f"G-code file not found: {gcode_path}")
+    lines = gcode_path.read_text(encoding="utf-8", errors="replace").splitlines()
+    program = Program.from_lines(lines)
+    job_path = Path(args.job) if args.job else gcode_path.with_name(gcode_path.name + ".job.json")
+    show = _progress_writer(sys.stderr)
+
+    if args.octoprint:
+        from arapp.printing.link.octoprint import OctoPrintLink, load_api_key
+
+        if not args.api_key_file:
+            raise ValueError("--octoprint needs --api-key-file F (or --save-key F to store a key first)")
+        link = OctoPrintLink(args.octoprint, load_api_key(args.api_key_file), job_path=job_path)
+        link.connect()
+        print(f"connected to {link.version or 'OctoPrint'} at {link.url}", file=sys.stderr)
+        try:
+            final, interrupted = _run_job(link, lambda: link.print_gcode(lines, progress=show,
+                                                                           gcode_path=str(gcode_path)))
+        finally:
+            link.close()
+    else:
+        from arapp.printing.link.serial_link import SerialPrinter
+
+        port = args.port or (profile.link.port if profile is not None else None)
+        baud = args.baud or (profile.link.baud if profile is not None else 115200)
+        if not port:
+            raise ValueError("no serial port: give --port DEV or set link.port in the printer profile")
+        bed_height = profile.bed.height if profile is not None else None
+        link = SerialPrinter(port, baud, window=args.window, timeout=args.timeout,
+                             job_path=job_path, bed_height=bed_height)
+        preamble = []
+        if state is not None:
+            state.check_program(program, gcode_path)
+            preamble = resume_commands(state, bed_height=bed_height)
+            print(f"resuming {gcode_path} at line {state.next_line + 1} (layer {state.layer})", file=sys.stderr)
+        link.connect()
+        print(f"connected to {link.firmware or 'printer'} on {port}", file=sys.stderr)
+        try:
+            final, interrupted = _run_job(link, lambda: link.print_gcode(
+                lines, progress=show, program=program, state=state, preamble=preamble,
+                gcode_path=str(gcode_path.resolve())))
+        finally:
+            link.close()
+    print(file=sys.stderr)
+    print(f"{final.status}: {final.commands_done}/{final.commands_total} lines, job state in {job_path}")
+    return 130 if interrupted else 0

@@ -1,11 +1,47 @@
-"""`arapp record`: not yet implemented."""
+"""`arapp record`: record a source into a recording folder (arapp-recording/1)."""
 
-HELP = "(not yet implemented)"
+HELP = "record a camera or video into a recording folder (video, frames.csv, session.json)"
 
 
 def add_arguments(parser):
-    pass
+    parser.add_argument("--source", required=True, help="v4l2:0, v4l2:/dev/video2, depthai[:<id>], or a video file")
+    parser.add_argument("--out", required=True, help="recording folder to create, e.g. recordings/my_desk")
+    parser.add_argument("--calibration", help="OpenCV calibration YAML (needed for V4L2 cameras and video files)")
+    parser.add_argument("--anchors", help="JSON file with the anchors list (as in session.json); "
+                        "default: one aruco DICT_4X4_50 id 0 of 0.05 m")
+    parser.add_argument("--seconds", type=float, help="stop after this many seconds (default: until Ctrl-C or the end)")
+    parser.add_argument("--width", type=int, help="requested camera width")
+    parser.add_argument("--height", type=int, help="requested camera height")
+    parser.add_argument("--fps", type=float, help="requested camera frame rate")
+    parser.add_argument("--codec", default="MJPG", choices=["MJPG", "FFV1"],
+                        help="MJPG (.avi, intra-frame) or FFV1 (.mkv, lossless)")
+    parser.add_argument("--force", action="store_true", help="overwrite an existing recording")
 
 
 def run(args):
-    raise RuntimeError("'arapp record' is not implemented yet")
+    import json
+    from pathlib import Path
+
+    from tracking.errors import SessionError
+    from tracking.recorder import record
+    from tracking.sources import open_source
+
+    anchors = None
+    if args.anchors:
+        path = Path(args.anchors)
+        if not path.is_file():
+            raise SessionError(f"{path}: anchors file does not exist")
+        try:
+            data = json.loads(path.read_text())
+        except json.JSONDecodeError as e:
+            raise SessionError(f"{path}: invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}") from None
+        anchors = data.get("anchors") if isinstance(data, dict) else data
+    out = Path(args.out)
+    if out.exists() and any(out.iterdir()) and not args.force:
+        raise FileExistsError(f"{out}: already holds files (a recording?); use --force to overwrite it")
+    with open_source(args.source, calibration=args.calibration, width=args.width, height=args.height,
+                     fps=args.fps) as src:
+        src.camera  # noqa: B018 - fail before creating files if the source has no calibration
+        session = record(src, out, anchors=anchors, seconds=args.seconds, force=args.force, fourcc=args.codec)
+    print(f"{session.folder}: {session.video}, {session.camera.width}x{session.camera.height} @ {session.fps:.1f} fps")
+    return 0

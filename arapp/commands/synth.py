@@ -1,11 +1,44 @@
-"""`arapp synth`: not yet implemented."""
+"""`arapp synth`: render a synthetic recording with exact ground truth."""
 
-HELP = "(not yet implemented)"
+HELP = "render a synthetic recording (textured desk, anchors, ground truth) from a preset or scene JSON"
 
 
 def add_arguments(parser):
-    pass
+    parser.add_argument("scene", nargs="?", help="preset name, a scene .json file, or 'all' for every preset "
+                        "(then --out is the parent folder)")
+    parser.add_argument("--out", help="recording folder to write (for 'all': the folder holding one per preset)")
+    parser.add_argument("--force", action="store_true", help="overwrite an existing recording")
+    parser.add_argument("--frames", type=int, help="render only the first N frames (quick previews)")
+    parser.add_argument("--list", action="store_true", help="list the presets and exit")
 
 
 def run(args):
-    raise RuntimeError("'arapp synth' is not implemented yet")
+    import sys
+    from pathlib import Path
+
+    from tracking.synth import scene_from_arg, synthesize
+    from tracking.synth.presets import PRESETS
+
+    if args.list or not args.scene:
+        for name, p in PRESETS.items():
+            cam = p["camera"]
+            print(f"{name:18s} {cam['width']}x{cam['height']} {p['duration']:.1f} s  "
+                  f"{', '.join(a['kind'] for a in p['anchors'])}  {p['trajectory']['kind']}")
+        return 0
+    if not args.out:
+        raise ValueError("--out is required: the recording folder to write (e.g. recordings/my_scene)")
+    names = list(PRESETS) if args.scene == "all" else [args.scene]
+    for name in names:
+        scene = scene_from_arg(name)
+        out = Path(args.out) / name if args.scene == "all" else Path(args.out)
+
+        def progress(i, n, out=out):
+            if i % 10 == 0 or i == n:
+                print(f"\r{out}: frame {i}/{n}", end="", file=sys.stderr, flush=True)
+
+        session = synthesize(scene, out, force=args.force, max_frames=args.frames, progress=progress)
+        size = sum(p.stat().st_size for p in out.iterdir()) / 1e6
+        print(f"\rwrote {out}: {session.camera.width}x{session.camera.height}, "
+              f"{scene.frame_count if args.frames is None else min(args.frames, scene.frame_count)} frames, "
+              f"{size:.1f} MB", file=sys.stderr)
+    return 0

@@ -1,0 +1,234 @@
+"""Model panel: the library with thumbnails, open a file, placement on the anchor, display mode,
+and the control-point editor for NURBS models."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6.QtCore import QSize, Qt, Signal
+from PySide6.QtGui import QIcon, QImage, QPixmap
+from PySide6.QtWidgets import (
+    QComboBox,
+    QDoubleSpinBox,
+    QFormLayout,
+    QGroupBox,
+    QHBoxLayout,
+    QLabel,
+    QListView,
+    QListWidget,
+    QListWidgetItem,
+    QPushButton,
+    QSpinBox,
+    QVBoxLayout,
+    QWidget,
+)
+
+MODEL_FILTER = "Models (*.json *.stl *.obj *.ply *.3mf *.glb);;NURBS models (*.json);;Meshes (*.stl *.obj *.ply *.3mf *.glb)"
+MODES = ("shaded", "wireframe", "isolines", "translucent")
+THUMB = 72
+
+
+def library_folder() -> Path:
+    """models/ in the working directory when there is one, else next to the arapp package (a source checkout)."""
+    here = Path.cwd() / "models"
+    if here.is_dir():
+        return here
+    return Path(__file__).resolve().parents[3] / "models"
+
+
+def library_files(folder: Path | None = None) -> list[Path]:
+    folder = folder or library_folder()
+    return sorted(folder.glob("*.json")) if folder.is_dir() else []
+
+
+def _spin(lo: float, hi: float, step: float, decimals: int, suffix: str = "") -> QDoubleSpinBox:
+    s = QDoubleSpinBox()
+    s.setRange(lo, hi)
+    s.setSingleStep(step)
+    s.setDecimals(decimals)
+    s.setKeyboardTracking(False)  # typing "120" applies once, not as 1, 12, 120
+    if suffix:
+        s.setSuffix(suffix)
+    return s
+
+
+class ModelPanel(QWidget):
+    """Widgets only; the main window loads models and talks to the pipeline.
+
+    Signals: model_chosen(path), placement_changed(dict with size_mm, offset, rotation_deg),
+    mode_changed(str), point_selected(surface, i, j), point_edited(surface, i, j, (x, y, z), weight),
+    print_requested().
+    """
+
+    model_chosen = Signal(str)
+    open_requested = Signal()
+    placement_changed = Signal(dict)
+    mode_changed = Signal(str)
+    point_selected = Signal(int, int, int)
+    point_edited = Signal(int, int, int, tuple, float)
+    print_requested = Signal()
+
+    def __init__(self, parent=None):
+        super().__init__(parent)
+        lay = QVBoxLayout(self)
+        lay.setContentsMargins(4, 4, 4, 4)
+
+        self.library = QListWidget()
+        self.library.setViewMode(QListView.ViewMode.IconMode)
+        self.library.setIconSize(QSize(THUMB, THUMB))
+        self.library.setGridSize(QSize(THUMB + 28, THUMB + 30))
+        self.library.setResizeMode(QListView.ResizeMode.Adjust)
+        self.library.setMovement(QListView.Movement.Static)
+        self.library.setWordWrap(True)
+        self.library.setMinimumHeight(2 * (THUMB + 30) + 8)
+        self.library.itemActivated.connect(self._activated)
+        self.library.itemClicked.connect(self._activated)
+        lay.addWidget(QLabel("Library (models/)"))
+        lay.addWidget(self.library, 1)
+        row = QHBoxLayout()
+        self.open_button = QPushButton("Open model...")
+        self.open_button.clicked.connect(self.open_requested)
+        self.print_button = QPushButton("Print... (P)")
+        self.print_button.clicked.connect(self.print_requested)
+        row.addWidget(self.open_button)
+        row.addWidget(self.print_button)
+        lay.addLayout(row)
+        self.current = QLabel("No model")
+        self.current.setWordWrap(True)
+        lay.addWidget(self.current)
+
+        place = QGroupBox("Placement on the anchor")
+        pf = QFormLayout(place)
+        self.size = _spin(1.0, 1000.0, 5.0, 1, " mm")
+        self.offset = [_spin(-1000.0, 1000.0, 1.0, 1, " mm") for _ in range(3)]
+        self.rotation = _spin(-360.0, 360.0, 5.0, 1, " deg")
+        pf.addRow("Size", self.size)
+        off_row = QHBoxLayout()
+        for s in self.offset:
+            off_row.addWidget(s)
+        pf.addRow("Offset x y z", off_row)
+        pf.addRow("Rotation", self.rotation)
+        self.mode = QComboBox()
+        self.mode.addItems(MODES)
+        self.mode.currentTextChanged.connect(self.mode_changed)
+        pf.addRow("Display", self.mode)
+        for s in (self.size, self.rotation, *self.offset):
+            s.valueChanged.connect(self._placement_edited)
+        lay.addWidget(place)
+
+        edit = QGroupBox("Control point (NURBS)")
+        ef = QFormLayout(edit)
+        self.surface_index = QSpinBox()
+        self.u_index = QSpinBox()
+        self.v_index = QSpinBox()
+        sel = QHBoxLayout()
+        for label, s in (("surface", self.surface_index), ("u", self.u_index), ("v", self.v_index)):
+            sel.addWidget(QLabel(label))
+            sel.addWidget(s)
+            s.valueChanged.connect(self._selection_changed)
+        ef.addRow(sel)
+        self.weight = _spin(-100.0, 100.0, 0.1, 3)
+        self.position = [_spin(-1e6, 1e6, 0.1, 3) for _ in range(3)]
+        ef.addRow("Weight", self.weight)
+        pos_row = QHBoxLayout()
+        for s in self.position:
+            pos_row.addWidget(s)
+        ef.addRow("Position", pos_row)
+        for s in (self.weight, *self.position):
+            s.valueChanged.connect(self._point_edited)
+        self.edit_box = edit
+        edit.setEnabled(False)
+        lay.addWidget(edit)
+        self._quiet = False
+        self._surfaces = []
+        self._tilt = (0.0, 0.0)
+        self.set_placement({"size_mm": 50.0, "offset": (0.0, 0.0, 0.0), "rotation_deg": (0.0, 0.0, 0.0)})
+
+    # -- library -----------------------------------------------------------------------
+    def set_library(self, paths: list[Path]) -> None:
+        self.library.clear()
+        for p in paths:
+            item = QListWidgetItem(p.stem)
+            item.setData(Qt.ItemDataRole.UserRole, str(p))
+            item.setToolTip(str(p))
+            item.setSizeHint(QSize(THUMB + 24, THUMB + 28))
+            self.library.addItem(item)
+
+    def set_thumbnail(self, path: str, bgr) -> None:
+        """bgr: (h, w, 3) uint8 picture for the library entry of `path`."""
+        h, w = bgr.shape[:2]
+        img = QImage(bgr.data, w, h, bgr.strides[0], QImage.Format.Format_BGR888).copy()
+        for i in range(self.library.count()):
+            item = self.library.item(i)
+            if item.data(Qt.ItemDataRole.UserRole) == path:
+                item.setIcon(QIcon(QPixmap.fromImage(img)))
+
+    def _activated(self, item: QListWidgetItem) -> None:
+        self.model_chosen.emit(item.data(Qt.ItemDataRole.UserRole))
+
+    # -- current model -------------------------------------------------------------------
+    def set_model(self, model, path: str, placement) -> None:
+        """Show the loaded model's name, its placement and (for NURBS) its control points."""
+        name = getattr(model, "name", None) or Path(path).stem
+        surfaces = list(getattr(model, "surfaces", None) or [])
+        self.current.setText(f"<b>{name}</b> &nbsp; {Path(path).name}" + (
+            f", {len(surfaces)} NURBS surface{'s' if len(surfaces) != 1 else ''}" if surfaces else ", mesh"))
+        self.set_placement(placement)
+        self._surfaces = surfaces
+        self.edit_box.setEnabled(bool(surfaces))
+        self._quiet = True
+        self.surface_index.setRange(0, max(0, len(surfaces) - 1))
+        self.surface_index.setValue(0)
+        self._quiet = False
+        self._selection_changed()
+
+    def set_surfaces(self, surfaces: list) -> None:
+        """The edited surfaces (same shapes), so the fields show the values in force."""
+        self._surfaces = list(surfaces)
+
+    def set_placement(self, placement) -> None:
+        """placement: a dict as `display_placement` gives (size_mm, offset, rotation_deg as 3 angles)."""
+        from arapp.placement import placement_from_any
+
+        p = placement_from_any(placement)
+        self._quiet = True
+        self.size.setValue(p.size_mm)
+        for s, v in zip(self.offset, p.offset):
+            s.setValue(v)
+        self._tilt = tuple(float(a) for a in p.rotation_deg[:2])  # turns about x and y stay the model's
+        self.rotation.setValue(float(p.rotation_deg[2]))
+        self._quiet = False
+
+    def placement(self) -> dict:
+        return {"size_mm": self.size.value(), "offset": tuple(s.value() for s in self.offset),
+                "rotation_deg": (*self._tilt, self.rotation.value())}
+
+    def _placement_edited(self) -> None:
+        if not self._quiet:
+            self.placement_changed.emit(self.placement())
+
+    def selected(self) -> tuple[int, int, int]:
+        return self.surface_index.value(), self.u_index.value(), self.v_index.value()
+
+    def _selection_changed(self) -> None:
+        if self._quiet or not self._surfaces:
+            return
+        k = min(self.surface_index.value(), len(self._surfaces) - 1)
+        s = self._surfaces[k]
+        n_u, n_v = s.control_points.shape[:2]
+        self._quiet = True
+        self.u_index.setRange(0, n_u - 1)
+        self.v_index.setRange(0, n_v - 1)
+        i, j = self.u_index.value(), self.v_index.value()
+        self.weight.setValue(float(s.weights[i, j]))
+        for box, v in zip(self.position, s.control_points[i, j]):
+            box.setValue(float(v))
+        self._quiet = False
+        self.point_selected.emit(k, i, j)
+
+    def _point_edited(self) -> None:
+        if self._quiet or not self._surfaces:
+            return
+        k, i, j = self.selected()
+        xyz = tuple(float(b.value()) for b in self.position)
+        self.point_edited.emit(k, i, j, xyz, float(self.weight.value()))

@@ -1,0 +1,144 @@
+"""Tracking panel: state, anchors seen, inliers, fps, latency; reset; the anchors in use and their editor."""
+
+from __future__ import annotations
+
+import json
+
+from PySide6.QtCore import Signal
+from PySide6.QtWidgets import (
+    QDialog,
+    QDialogButtonBox,
+    QFormLayout,
+    QHBoxLayout,
+    QLabel,
+    QPlainTextEdit,
+    QPushButton,
+    QTreeWidget,
+    QTreeWidgetItem,
+    QVBoxLayout,
+    QWidget,
+)
+
+STATE_STYLE = {"marker": "color: #2a2; font-weight: bold", "slam": "color: #29c; font-weight: bold",
+               "lost": "color: #c33; font-weight: bold"}
+
+
+def anchor_summary(anchor) -> tuple[str, str, str, str]:
+    """(kind, dictionary, ids, size) strings for one AnchorSpec, sizes in millimetres."""
+    ids = anchor.marker_ids()
+    if anchor.kind == "qr":
+        id_text = repr(anchor.text)
+    elif len(ids) > 3:
+        id_text = f"{ids[0]}..{ids[-1]}"
+    else:
+        id_text = ", ".join(str(i) for i in ids)
+    if anchor.kind in ("aruco", "qr"):
+        size = f"{anchor.length * 1e3:g} mm"
+    elif anchor.kind == "aruco_board":
+        size = (f"{anchor.markers_x}x{anchor.markers_y} x {anchor.marker_length * 1e3:g} mm, "
+                f"gap {anchor.separation * 1e3:g} mm")
+    else:
+        size = (f"{anchor.squares_x}x{anchor.squares_y} x {anchor.square_length * 1e3:g} mm, "
+                f"markers {anchor.marker_length * 1e3:g} mm")
+    return anchor.kind, anchor.dictionary or "", id_text, size
+
+
+class TrackingPanel(QWidget):
+    """Shows what the tracker reports for the newest painted frame."""
+
+    reset_requested = Signal()
+    edit_anchors_requested = Signal()
+    marker_sheets_requested = Signal()
+
+    def __init__(self, parent=None):
+        super().__init__(parent)
+        lay = QVBoxLayout(self)
+        form = QFormLayout()
+        self.state = QLabel("-")
+        self.markers = QLabel("-")
+        self.inliers = QLabel("-")
+        self.fps = QLabel("-")
+        self.latency = QLabel("-")
+        self.timing = QLabel("-")
+        self.dropped = QLabel("-")
+        form.addRow("State", self.state)
+        form.addRow("Anchors seen", self.markers)
+        form.addRow("Inliers", self.inliers)
+        form.addRow("Frame rate", self.fps)
+        form.addRow("Latency", self.latency)
+        form.addRow("Track / render", self.timing)
+        form.addRow("Dropped", self.dropped)
+        lay.addLayout(form)
+        self.reset_button = QPushButton("Reset tracking (R)")
+        self.reset_button.clicked.connect(self.reset_requested)
+        lay.addWidget(self.reset_button)
+        lay.addWidget(QLabel("Anchors (the first defines the world)"))
+        self.anchor_tree = QTreeWidget()
+        self.anchor_tree.setHeaderLabels(["Kind", "Dictionary", "Ids", "Size"])
+        self.anchor_tree.setRootIsDecorated(False)
+        self.anchor_tree.setMaximumHeight(120)
+        lay.addWidget(self.anchor_tree)
+        row = QHBoxLayout()
+        self.edit_anchors = QPushButton("Edit anchors...")
+        self.edit_anchors.setToolTip("Anchors for live cameras and plain videos (recordings bring their own)")
+        self.edit_anchors.clicked.connect(self.edit_anchors_requested)
+        self.sheets = QPushButton("Marker sheets...")
+        self.sheets.setToolTip("Save printable sheets of these anchors at true size")
+        self.sheets.clicked.connect(self.marker_sheets_requested)
+        row.addWidget(self.edit_anchors)
+        row.addWidget(self.sheets)
+        lay.addLayout(row)
+        lay.addStretch(1)
+
+    def set_anchors(self, anchors: list) -> None:
+        self.anchor_tree.clear()
+        for a in anchors:
+            self.anchor_tree.addTopLevelItem(QTreeWidgetItem(list(anchor_summary(a))))
+        for i in range(4):
+            self.anchor_tree.resizeColumnToContents(i)
+
+    def update_stats(self, result, fps: float, latency_ms: float, dropped: int) -> None:
+        """result: the pipeline's FrameResult of the frame just painted."""
+        self.state.setText(result.state)
+        self.state.setStyleSheet(STATE_STYLE.get(result.state, ""))
+        self.markers.setText(str(result.markers))
+        self.inliers.setText(str(result.inliers))
+        self.fps.setText(f"{fps:.1f} fps")
+        self.latency.setText(f"{latency_ms:.0f} ms (capture to paint)")
+        self.timing.setText(f"{result.ms_track:.1f} / {result.ms_render:.1f} ms")
+        self.dropped.setText(str(dropped))
+
+
+class AnchorsDialog(QDialog):
+    """Edits the anchors list as session.json writes it (JSON), validated by tracking.session.parse_anchors."""
+
+    def __init__(self, anchors_json: list, parent=None):
+        super().__init__(parent)
+        self.setWindowTitle("Anchors")
+        self.resize(520, 420)
+        lay = QVBoxLayout(self)
+        lay.addWidget(QLabel("Anchors as in session.json (metres; see RECORDING_FORMAT.md). "
+                             "Used for live cameras and videos without a session."))
+        self.text = QPlainTextEdit(json.dumps(anchors_json, indent=2))
+        lay.addWidget(self.text, 1)
+        self.problem = QLabel("")
+        self.problem.setStyleSheet("color: #c33")
+        self.problem.setWordWrap(True)
+        lay.addWidget(self.problem)
+        buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Ok | QDialogButtonBox.StandardButton.Cancel)
+        buttons.accepted.connect(self._accept)
+        buttons.rejected.connect(self.reject)
+        lay.addWidget(buttons)
+        self.anchors_json = anchors_json
+
+    def _accept(self) -> None:
+        from tracking.session import parse_anchors
+
+        try:
+            data = json.loads(self.text.toPlainText())
+            parse_anchors(data)
+        except (ValueError, TypeError, KeyError) as exc:
+            self.problem.setText(str(exc))
+            return
+        self.anchors_json = data
+        self.accept()

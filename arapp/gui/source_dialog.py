@@ -1,0 +1,125 @@
+"""Source picker: attached V4L2 and DepthAI cameras (listed in a worker, refreshed on demand),
+recordings, videos with calibration, and recent sources."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import (
+    QDialog,
+    QFileDialog,
+    QHBoxLayout,
+    QLabel,
+    QListWidget,
+    QListWidgetItem,
+    QPushButton,
+    QVBoxLayout,
+)
+
+from arapp.gui import sourcespec
+from arapp.gui.tasks import Task
+
+
+class SourceDialog(QDialog):
+    """Emits source_chosen(spec) and closes when the user picks something."""
+
+    source_chosen = Signal(str)
+    devices_listed = Signal(list)
+
+    def __init__(self, recent: list[str], parent=None):
+        super().__init__(parent)
+        self.setWindowTitle("Open a source")
+        self.resize(520, 420)
+        lay = QVBoxLayout(self)
+        lay.addWidget(QLabel("Cameras attached to this computer"))
+        self.devices = QListWidget()
+        self.devices.itemActivated.connect(self._pick)
+        self.devices.itemDoubleClicked.connect(self._pick)
+        lay.addWidget(self.devices, 1)
+        row = QHBoxLayout()
+        self.refresh_button = QPushButton("Refresh")
+        self.refresh_button.clicked.connect(self.refresh)
+        self.open_button = QPushButton("Open camera")
+        self.open_button.clicked.connect(lambda: self._pick(self.devices.currentItem()))
+        row.addWidget(self.refresh_button)
+        row.addWidget(self.open_button)
+        row.addStretch(1)
+        lay.addLayout(row)
+        lay.addWidget(QLabel("Recent"))
+        self.recent = QListWidget()
+        for spec in recent:
+            item = QListWidgetItem(spec)
+            item.setData(Qt.ItemDataRole.UserRole, spec)
+            self.recent.addItem(item)
+        self.recent.itemActivated.connect(self._pick)
+        self.recent.itemDoubleClicked.connect(self._pick)
+        lay.addWidget(self.recent, 1)
+        row2 = QHBoxLayout()
+        rec = QPushButton("Recording folder...")
+        rec.clicked.connect(self._choose_recording)
+        vid = QPushButton("Video + calibration...")
+        vid.clicked.connect(self._choose_video)
+        close = QPushButton("Close")
+        close.clicked.connect(self.reject)
+        for b in (rec, vid):
+            row2.addWidget(b)
+        row2.addStretch(1)
+        row2.addWidget(close)
+        lay.addLayout(row2)
+        self.status = QLabel("")
+        self.status.setWordWrap(True)
+        lay.addWidget(self.status)
+        self._task = None
+        self.refresh()
+
+    def refresh(self) -> None:
+        """List devices in a worker thread (DepthAI's USB search takes a moment)."""
+        if self._task is not None and self._task.running:
+            return
+        self.status.setText("Looking for cameras...")
+        self.refresh_button.setEnabled(False)
+        self._task = Task(sourcespec.list_devices, done=self._listed, failed=self._list_failed,
+                          name="arapp-list-devices", owner=self).start()
+
+    def _listed(self, devices: list) -> None:
+        self.refresh_button.setEnabled(True)
+        self.devices.clear()
+        for spec, desc in devices:
+            item = QListWidgetItem(f"{desc}   [{spec}]")
+            item.setData(Qt.ItemDataRole.UserRole, spec)
+            self.devices.addItem(item)
+        self.status.setText(f"{len(devices)} camera{'s' if len(devices) != 1 else ''} found"
+                            if devices else "No V4L2 or DepthAI camera is attached.")
+        self.devices_listed.emit(devices)
+
+    def _list_failed(self, exc: BaseException) -> None:
+        self.refresh_button.setEnabled(True)
+        self.status.setText(f"Cannot list cameras: {exc}")
+        self.devices_listed.emit([])
+
+    def _pick(self, item) -> None:
+        if item is None:
+            return
+        self._choose(item.data(Qt.ItemDataRole.UserRole))
+
+    def _choose(self, spec: str) -> None:
+        self.source_chosen.emit(spec)
+        self.accept()
+
+    def _choose_recording(self) -> None:
+        folder = QFileDialog.getExistingDirectory(self, "Open a recording folder", str(Path.cwd() / "recordings"))
+        if folder:
+            self._choose(folder)
+
+    def _choose_video(self) -> None:
+        video, _ = QFileDialog.getOpenFileName(self, "Open a video", str(Path.cwd()),
+                                               "Videos (*.mp4 *.mkv *.avi *.mov *.webm);;All files (*)")
+        if not video:
+            return
+        calib, _ = QFileDialog.getOpenFileName(self, "Its camera calibration (OpenCV YAML)", str(Path(video).parent),
+                                               "Calibration (*.yaml *.yml *.json);;All files (*)")
+        if calib:
+            self._choose(sourcespec.video_spec(video, calib))
+        else:
+            self.status.setText("A video needs its camera calibration for tracking (YAML from 'arapp calibrate').")

@@ -1,0 +1,72 @@
+"""The live view widget: paints the newest composited frame, scaled to fit, and nothing else."""
+
+from __future__ import annotations
+
+import time
+
+from PySide6.QtCore import QRectF, Qt, Signal
+from PySide6.QtGui import QColor, QImage, QPainter
+from PySide6.QtWidgets import QSizePolicy, QWidget
+
+
+class VideoView(QWidget):
+    """Shows a QImage letter-boxed in the widget; `painted(perf_counter)` is emitted after each new frame is painted.
+
+    Painting a frame is a single scaled blit on the UI thread; every
+    per-pixel step (tracking, rendering, compositing, BGR wrapping) happened
+    in the workers.
+    """
+
+    painted = Signal(float)
+    resized = Signal(int, int)  # device pixels available for the frame
+
+    def __init__(self, parent=None):
+        super().__init__(parent)
+        self.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
+        self.setMinimumSize(320, 180)
+        self.setAttribute(Qt.WidgetAttribute.WA_OpaquePaintEvent, True)
+        self._image: QImage | None = None
+        self._new = False
+        self.message = "Open a recording or a camera (File menu), or drop a recording folder here"
+
+    def set_image(self, image: QImage | None) -> None:
+        self._image = image
+        self._new = image is not None
+        self.update()
+
+    def image(self) -> QImage | None:
+        return self._image
+
+    def resizeEvent(self, event):  # noqa: N802
+        super().resizeEvent(event)
+        r = self.devicePixelRatioF()
+        self.resized.emit(int(self.width() * r), int(self.height() * r))
+
+    def image_rect(self) -> QRectF:
+        """Where the frame lands in widget coordinates (aspect kept, centred)."""
+        if self._image is None or self._image.width() == 0:
+            return QRectF(self.rect())
+        r = self._image.devicePixelRatio()
+        iw, ih = self._image.width() / r, self._image.height() / r
+        s = min(self.width() / iw, self.height() / ih)
+        w, h = iw * s, ih * s
+        return QRectF((self.width() - w) / 2, (self.height() - h) / 2, w, h)
+
+    def paintEvent(self, event):  # noqa: N802 - Qt's name
+        p = QPainter(self)
+        p.fillRect(self.rect(), QColor(24, 24, 28))
+        if self._image is None:
+            p.setPen(QColor(180, 180, 190))
+            p.drawText(self.rect(), Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextWordWrap, self.message)
+            p.end()
+            return
+        rect = self.image_rect()
+        ratio = self.devicePixelRatioF()
+        if abs(rect.width() * ratio - self._image.width()) > 1.5:
+            # only while the window is being resized: the workers scale frames to the view's size
+            p.setRenderHint(QPainter.RenderHint.SmoothPixmapTransform, True)
+        p.drawImage(rect, self._image)
+        p.end()
+        if self._new:
+            self._new = False
+            self.painted.emit(time.perf_counter())

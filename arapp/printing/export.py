@@ -1,0 +1,252 @@
+"""The model as displayed, as a printable solid in the bed frame (mm), and STL/3MF files.
+
+`placed_solid` takes the model's placement on the anchor (size, offset and turn
+about the anchor normal, arapp.placement) to millimetres with the anchor's
+out-of-paper normal as +Z, makes it watertight (thickening an open patch),
+drops it onto the bed (lowest point at z = 0) and centres it on the bed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+MESH_SUFFIXES = (".stl", ".obj", ".3mf", ".ply", ".off", ".glb", ".gltf")
+_UNIT_MM = {"mm": 1.0, "millimeter": 1.0, "millimeters": 1.0, "millimetre": 1.0, "cm": 10.0, "centimeter": 10.0,
+            "centimeters": 10.0, "m": 1000.0, "meter": 1000.0, "meters": 1000.0, "metre": 1000.0,
+            "in": 25.4, "inch": 25.4, "inches": 25.4, "um": 1e-3, "micron": 1e-3, "ft": 304.8, "foot": 304.8}
+
+
+class ModelDoesNotFitError(ValueError):
+    """The model (with its skirt) is larger than the printer's build volume."""
+
+
+class MeshFileError(ValueError):
+    """A mesh file that cannot be read or holds no triangles."""
+
+
+def units_to_mm(units: str | None) -> float:
+    """Millimetres per model unit; None or unknown units are taken as millimetres."""
+    if not units:
+        return 1.0
+    return _UNIT_MM.get(str(units).strip().lower(), 1.0)
+
+
+def clean_mesh(mesh: trimesh.Trimesh, merge_digits: int = 4) -> trimesh.Trimesh:
+    """A copy with coincident vertices merged (to 10^-digits mm, the bound tolerance for files of limited
+    precision), faces with a repeated vertex dropped and, for a closed mesh, outward winding."""
+    m = trimesh.Trimesh(vertices=np.asarray(mesh.vertices, dtype=float), faces=np.asarray(mesh.faces), process=False)
+    m.merge_vertices(digits_vertex=merge_digits)
+    f = m.faces
+    keep = (f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])
+    if not keep.all():
+        m.update_faces(keep)
+    m.remove_unreferenced_vertices()
+    if not m.is_winding_consistent:
+        trimesh.repair.fix_winding(m)
+    if m.is_watertight and m.volume < 0:
+        m.invert()
+    return m
+
+
+def thicken(mesh: trimesh.Trimesh, thickness: float) -> trimesh.Trimesh:
+    """A closed solid from an open surface patch: offset both ways along the vertex normals by
+    thickness/2 and stitch the boundary with a side wall. Units are the mesh's."""
+    m = clean_mesh(mesh)
+    n = len(m.vertices)
+    normals = m.vertex_normals
+    top = m.vertices + normals * thickness / 2
+    bottom = m.vertices - normals * thickness / 2
+    faces = [m.faces, m.faces[:, ::-1] + n]
+    edges = m.edges  # directed, in face winding order
+    key = np.sort(edges, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    boundary = edges[counts[inverse.ravel()] == 1]
+    if len(boundary):
+        a, b = boundary[:, 0], boundary[:, 1]
+        faces.append(np.column_stack([b, a, a + n]))
+        faces.append(np.column_stack([b, a + n, b + n]))
+    solid = trimesh.Trimesh(vertices=np.vstack([top, bottom]), faces=np.vstack(faces), process=True)
+    if solid.is_watertight and solid.volume < 0:
+        solid.invert()
+    return solid
+
+
+def _is_model(obj) -> bool:
+    return not isinstance(obj, trimesh.Trimesh) and callable(getattr(obj, "mesh", None))
+
+
+def _as_matrix(placement) -> np.ndarray | None:
+    """`placement` as a 4x4 model -> placement-frame (mm) matrix when it is one, else None."""
+    if isinstance(placement, (np.ndarray, list, tuple)):
+        M = np.asarray(placement, dtype=float)
+        if M.shape != (4, 4) or not np.all(np.isfinite(M)):
+            raise ValueError("a placement given as a matrix must be a finite 4x4 map (model units -> placement mm)")
+        return M
+    return None
+
+
+def _model_matrix(model, placement) -> np.ndarray:
+    """4x4 from the model's units to the placement frame (mm, +Z out of the paper), as the model is displayed."""
+    M = _as_matrix(placement)
+    if M is not None:
+        return M
+    if placement is None:
+        return np.asarray(model.placement_matrix("mm"), dtype=float)
+    import dataclasses
+
+    from arapp.placement import placement_from_any
+
+    shown = dataclasses.replace(model, placement=placement_from_any(placement, model.placement))
+    return np.asarray(shown.placement_matrix("mm"), dtype=float)
+
+
+def placed_solid(mesh_or_model, placement=None, *, thickness_mm: float = 2.0, profile=None,
+                 center: bool = True) -> trimesh.Trimesh:
+    """The model as displayed, as a watertight solid in the bed frame (mm).
+
+    `mesh_or_model`: an arapp.geometry Model or a trimesh.Trimesh.
+    `placement`: a 4x4 matrix from model units to the anchor's placement frame
+    in mm (what `Model.placement_matrix("mm")` gives), an
+    arapp.geometry Placement or a dict for `arapp.placement.placement_from_any`
+    (missing keys from the model's own placement), or None: the model's own
+    placement; for a Trimesh, None means it is already in mm with +Z up.
+    A model's open surfaces are closed by `Model.solid` with walls of
+    `thickness_mm` (in placed millimetres); an open Trimesh patch is thickened
+    likewise. The result's lowest point is at z = 0 and, with `center`, its
+    bounding box is centred on the bed of `profile` (the generic printer when None).
+    """
+    if _is_model(mesh_or_model):
+        model = mesh_or_model
+        M = _model_matrix(model, placement)
+        scale = abs(np.linalg.det(M[:3, :3])) ** (1.0 / 3.0)
+        if not scale > 0:
+            raise ValueError("the placement scales the model to nothing")
+        mesh = model.solid(thickness=thickness_mm / scale) if callable(getattr(model, "solid", None)) else model.mesh()
+        mesh = mesh.copy()
+        mesh.apply_transform(M)
+    elif isinstance(mesh_or_model, trimesh.Trimesh):
+        mesh = mesh_or_model.copy()
+        if placement is not None:
+            M = _as_matrix(placement)
+            if M is None:
+                from arapp.placement import placement_from_model
+
+                M = placement_from_model(mesh.bounds, placement)
+            mesh.apply_transform(M)
+    else:
+        raise TypeError(f"placed_solid needs a trimesh.Trimesh or an arapp.geometry Model, got {type(mesh_or_model).__name__}")
+    if len(mesh.faces) == 0:
+        raise MeshFileError("the model has no triangles to print")
+    mesh = clean_mesh(mesh)
+    if not mesh.is_watertight:
+        trimesh.repair.fill_holes(mesh)
+        trimesh.repair.fix_winding(mesh)
+    if not mesh.is_watertight:
+        mesh = thicken(mesh, thickness_mm)
+    if mesh.volume < 0:
+        mesh.invert()
+    return drop_on_bed(mesh, profile, center=center)
+
+
+def drop_on_bed(mesh: trimesh.Trimesh, profile=None, center: bool = True) -> trimesh.Trimesh:
+    """The mesh moved so its lowest point is at z = 0 and (with `center`) its bounding box centred on the bed."""
+    from .profile import load_profile
+
+    profile = profile or load_profile()
+    lo, hi = mesh.bounds
+    shift = np.array([0.0, 0.0, -lo[2]])
+    if center:
+        cx, cy = profile.bed_center
+        shift[:2] = [cx - (lo[0] + hi[0]) / 2, cy - (lo[1] + hi[1]) / 2]
+    out = mesh.copy()
+    out.apply_translation(shift)
+    return out
+
+
+def fit_on_bed(mesh: trimesh.Trimesh, profile, margin: float = 0.0, scale_to_fit: bool = False,
+               center: bool = True) -> tuple[trimesh.Trimesh, float]:
+    """The mesh on the bed (z from 0, centred when asked) and the scale applied (1 unless scaled to fit).
+
+    `margin` mm must stay free around the footprint (the skirt). A model that
+    does not fit raises ModelDoesNotFitError, unless `scale_to_fit` shrinks it
+    uniformly until it does.
+    """
+    extent = mesh.extents
+    bed = profile.bed
+    room = np.array([bed.width - 2 * margin, bed.depth - 2 * margin, bed.height])
+    scale = 1.0
+    if np.any(extent > room + 1e-9):
+        if not scale_to_fit:
+            raise ModelDoesNotFitError(
+                f"the model is {extent[0]:.1f} x {extent[1]:.1f} x {extent[2]:.1f} mm"
+                + (f" (plus {margin:.1f} mm of skirt around it)" if margin > 0 else "")
+                + f" but the bed of '{profile.name}' is {bed.width:g} x {bed.depth:g} x {bed.height:g} mm; "
+                "make it smaller (--size MM) or let arapp shrink it (--scale-to-fit)"
+            )
+        if np.any(room <= 0):
+            raise ModelDoesNotFitError(f"the skirt margin ({margin:.1f} mm) leaves no room on the bed of '{profile.name}'")
+        scale = float(np.min(room / np.maximum(extent, 1e-12))) * 0.999
+        mesh = mesh.copy()
+        mesh.apply_scale(scale)
+    return drop_on_bed(mesh, profile, center=center), scale
+
+
+def scale_to_size(mesh: trimesh.Trimesh, size_mm: float) -> trimesh.Trimesh:
+    """The mesh scaled uniformly so its larger horizontal (x, y) extent is `size_mm`."""
+    if not size_mm > 0:
+        raise ValueError(f"--size must be a positive number of millimetres, got {size_mm}")
+    ext = mesh.extents
+    ref = max(ext[0], ext[1]) if max(ext[0], ext[1]) > 1e-12 else ext[2]
+    out = mesh.copy()
+    out.apply_scale(size_mm / ref)
+    return out
+
+
+def load_mesh(path: str | Path) -> trimesh.Trimesh:
+    """A triangle mesh from STL (ASCII or binary), OBJ, 3MF, ... in millimetres (3MF units honoured).
+
+    Normals in the file are ignored (some exporters write zeros); facets are
+    re-oriented only through `clean_mesh` when the mesh is closed.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise MeshFileError(f"mesh file {p} not found")
+    try:
+        loaded = trimesh.load(p, force="mesh", process=True)
+    except (ValueError, KeyError, IndexError, OSError) as exc:
+        raise MeshFileError(f"cannot read mesh file {p}: {exc}") from None
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise MeshFileError(f"{p} holds no triangles")
+    units = getattr(loaded, "units", None)
+    if units:
+        loaded.apply_scale(units_to_mm(units))
+    return loaded
+
+
+def write_stl(mesh: trimesh.Trimesh, path: str | Path) -> Path:
+    """Write a binary STL (millimetres)."""
+    p = Path(path)
+    p.write_bytes(trimesh.exchange.stl.export_stl(mesh))
+    return p
+
+
+def write_3mf(mesh: trimesh.Trimesh, path: str | Path) -> Path:
+    """Write a 3MF file (units: millimetre)."""
+    p = Path(path)
+    m = mesh.copy()
+    m.units = "millimeters"
+    p.write_bytes(trimesh.exchange.threemf.export_3MF(m))
+    return p
+
+
+def write_mesh(mesh: trimesh.Trimesh, path: str | Path) -> Path:
+    """Write STL or 3MF by the file's suffix."""
+    suffix = Path(path).suffix.lower()
+    if suffix == ".stl":
+        return write_stl(mesh, path)
+    if suffix == ".3mf":
+        return write_3mf(mesh, path)
+    raise ValueError(f"cannot export {path}: use a .stl or .3mf file name")

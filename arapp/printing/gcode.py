@@ -1,0 +1,385 @@
+"""Marlin G-code: a writer for the built-in slicer's toolpaths and a parser that reads moves back per layer.
+
+Bed frame, millimetres, seconds. The writer puts `;LAYER:n` (0-based) and
+`;TYPE:...` comments in the file: the serial link and the AR preview use them
+to know the layer and the feature. The parser also reads PrusaSlicer's
+`;LAYER_CHANGE`/`;Z:` and Cura's `;LAYER:` conventions.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .slicer.planner import KIND_TYPES, LayerToolpaths
+
+# ---------------------------------------------------------------- writer
+
+
+def move_time(lengths: np.ndarray, speed: float, accel: float) -> float:
+    """Seconds to run moves of these lengths (mm) at `speed` mm/s, each from and to rest with
+    acceleration `accel` mm/s² (trapezoid or, for short moves, triangle profile)."""
+    lengths = np.asarray(lengths, dtype=float)
+    if lengths.size == 0:
+        return 0.0
+    full = lengths >= speed * speed / accel
+    t = np.where(full, lengths / speed + speed / accel, 2.0 * np.sqrt(np.maximum(lengths, 0.0) / accel))
+    return float(t.sum())
+
+
+def polyline_time(points: np.ndarray, speed: float, accel: float, corner_deg: float = 30.0) -> float:
+    """Seconds to extrude along a polyline (mm) at `speed`: the machine slows to a stop only at
+    corners sharper than `corner_deg` (a coarse stand-in for Marlin's junction deviation)."""
+    d = np.diff(points, axis=0)
+    seg = np.linalg.norm(d, axis=1)
+    if len(seg) == 0:
+        return 0.0
+    u = d / np.maximum(seg, 1e-12)[:, None]
+    cos_turn = (u[:-1] * u[1:]).sum(axis=1)
+    stops = np.flatnonzero(cos_turn < np.cos(np.radians(corner_deg))) + 1
+    pieces = np.add.reduceat(seg, np.concatenate([[0], stops])) if len(stops) else np.array([seg.sum()])
+    return move_time(pieces, speed, accel)
+
+
+def _layer_arrays(layer: LayerToolpaths, speeds: dict, area: float, accel: float) -> dict:
+    """Everything the writer needs for one layer's extrusions, computed for all its paths at once:
+    the `G1 X Y E` lines, E at each path's start and end, feed lines, extrusion time and filament."""
+    paths = layer.paths
+    counts = np.array([len(p.points) for p in paths])
+    pts = np.concatenate([p.points for p in paths])
+    path_of_point = np.repeat(np.arange(len(paths)), counts)
+    d = np.diff(pts, axis=0)
+    inside = path_of_point[1:] == path_of_point[:-1]          # a segment, not a jump between paths
+    seg = np.hypot(d[:, 0], d[:, 1]) * inside
+    widths = np.array([p.width for p in paths])
+    path_of_seg = path_of_point[1:]
+    de = widths[path_of_seg] * layer.height * seg / area
+    e_cum = np.concatenate([[0.0], np.cumsum(de)])               # E at each point
+    first_pt = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    last_pt = first_pt + counts - 1
+    v = np.array([speeds["first_layer"] if layer.index == 0 else speeds[p.kind] for p in paths])
+    # time: full stops at path ends and at corners sharper than 30 degrees
+    u = d / np.maximum(seg, 1e-12)[:, None]
+    cos_turn = np.einsum("ij,ij->i", u[:-1], u[1:])
+    new_piece = np.ones(len(seg), dtype=bool)
+    new_piece[1:] = ~inside[1:] | ~inside[:-1] | (cos_turn < np.cos(np.radians(30.0)))
+    piece_starts = np.flatnonzero(new_piece)
+    pieces = np.add.reduceat(seg, piece_starts) if len(seg) else np.zeros(0)
+    pv = v[path_of_seg[piece_starts]] if len(seg) else np.zeros(0)
+    full = pieces >= pv * pv / accel
+    t = np.where(full, pieces / np.maximum(pv, 1e-9) + pv / accel, 2.0 * np.sqrt(pieces / accel)).sum()
+    keep = np.flatnonzero(inside)
+    xs, ys, es = pts[keep + 1, 0].tolist(), pts[keep + 1, 1].tolist(), e_cum[keep + 1].tolist()
+    lines = list(map("G1 X{:.3f} Y{:.3f} E{:.5f}".format, xs, ys, es))
+    first_line = np.concatenate([[0], np.cumsum(counts - 1)]).tolist()
+    return {
+        "lines": lines,
+        "first_line": first_line,
+        "e_start": e_cum[first_pt].tolist(),
+        "e_end": e_cum[last_pt].tolist(),
+        "start_xy": pts[first_pt].tolist(),
+        "end_xy": pts[last_pt].tolist(),
+        "feed": [f"G1 F{x * 60:.0f}" for x in v.tolist()],
+        "time": float(t),
+        "filament": float(de.sum()),
+    }
+
+
+def format_duration(seconds: float) -> str:
+    s = int(round(seconds))
+    h, rem = divmod(s, 3600)
+    m, s = divmod(rem, 60)
+    return f"{h}h {m}m {s}s" if h else f"{m}m {s}s"
+
+
+@dataclass
+class GcodeStats:
+    print_time_s: float
+    filament_mm: float
+    filament_g: float
+    layers: int
+
+
+def write_gcode(layers: list[LayerToolpaths], settings, profile, header: list[str] | None = None) -> tuple[str, GcodeStats]:
+    """Marlin G-code for the layers' toolpaths, with travel, retraction and z-hop between paths.
+
+    `e` below is the extruder position while not retracted; a retraction moves
+    it retract_length lower and the un-retraction back. E (mm of filament,
+    absolute, reset to 0 each layer) = line width x layer height x length
+    / filament cross-section. Returns the text and its statistics (also written in the header).
+    """
+    mat = settings.material_info
+    speeds = settings.speeds()
+    accel = settings.acceleration
+    area = profile.filament_area
+    travel_f = speeds["travel"] * 60.0
+    retract_f = settings.retract_speed * 60.0
+    body: list[str] = []
+    emit = body.append
+    e = 0.0
+    filament = 0.0
+    time_s = 0.0
+    pos = None
+    retracted = False
+    z_now = 0.0
+    fan_on = False
+
+    def travel_to(xy, z):
+        nonlocal e, retracted, pos, time_s, z_now
+        dist = math.hypot(xy[0] - pos[0], xy[1] - pos[1]) if pos is not None else float("inf")
+        long_travel = dist > settings.retract_min_travel
+        if long_travel and settings.retract_length > 0 and not retracted and pos is not None:
+            emit(f"G1 E{e - settings.retract_length:.5f} F{retract_f:.0f}")
+            time_s += settings.retract_length / settings.retract_speed
+            retracted = True
+        hop = long_travel and settings.z_hop > 0 and pos is not None
+        if hop:
+            emit(f"G1 Z{z + settings.z_hop:.3f} F{travel_f:.0f}")
+            time_s += move_time([settings.z_hop], min(speeds["travel"], 10.0), accel)
+        if dist > 1e-9:
+            emit(f"G0 X{xy[0]:.3f} Y{xy[1]:.3f} F{travel_f:.0f}")
+            if math.isfinite(dist):
+                time_s += move_time([dist], speeds["travel"], accel)
+        if hop:
+            emit(f"G1 Z{z:.3f} F{travel_f:.0f}")
+            time_s += move_time([settings.z_hop], min(speeds["travel"], 10.0), accel)
+        if retracted:
+            emit(f"G1 E{e:.5f} F{retract_f:.0f}")
+            time_s += settings.retract_length / settings.retract_speed
+            retracted = False
+        pos = xy
+
+    for layer in layers:
+        emit(f";LAYER:{layer.index}")
+        emit(f";Z:{layer.z:.3f}")
+        emit(f";HEIGHT:{layer.height:.3f}")
+        if layer.index == 1 and settings.fan_percent() > 0 and not fan_on:
+            emit(f"M106 S{round(255 * settings.fan_percent() / 100)}")
+            fan_on = True
+        if pos is not None and settings.retract_length > 0 and not retracted:
+            emit(f"G1 E{e - settings.retract_length:.5f} F{retract_f:.0f}")
+            retracted = True
+        emit(f"G1 Z{layer.z:.3f} F{min(travel_f, 600.0):.0f}")
+        time_s += move_time([abs(layer.z - z_now)], 10.0, accel)
+        z_now = layer.z
+        # E restarts from 0 each layer; while retracted the filament sits retract_length below that
+        emit(f"G92 E{-settings.retract_length:.5f}" if retracted else "G92 E0")
+        e = 0.0
+        kind_now = None
+        if not layer.paths:
+            continue
+        plan = _layer_arrays(layer, speeds, area, accel)
+        time_s += plan["time"]
+        filament += plan["filament"]
+        lines, first, es, starts = plan["lines"], plan["first_line"], plan["e_end"], plan["start_xy"]
+        for i, path in enumerate(layer.paths):
+            e = plan["e_start"][i]
+            travel_to(starts[i], layer.z)
+            if path.kind != kind_now:
+                emit(f";TYPE:{KIND_TYPES[path.kind]}")
+                kind_now = path.kind
+            emit(plan["feed"][i])
+            body.extend(lines[first[i]:first[i + 1]])
+            e = es[i]
+            pos = plan["end_xy"][i]
+    # end: retract, lift clear of the part, then the printer's end code
+    if settings.retract_length > 0 and not retracted:
+        e -= settings.retract_length
+        emit(f"G1 E{e:.5f} F{retract_f:.0f}")
+    if layers:
+        emit(f"G1 Z{min(z_now + 10.0, profile.bed.height):.3f} F{min(travel_f, 600.0):.0f}")
+    emit("M107")
+
+    grams = filament * area * mat.density / 1000.0
+    stats = GcodeStats(print_time_s=time_s, filament_mm=filament, filament_g=grams, layers=len(layers))
+    hot, bed = settings.hotend(), settings.bed()
+    head = [
+        "; generated by arapp built-in slicer",
+        f"; printer = {profile.name}",
+        f"; material = {mat.name} (density {mat.density} g/cm3)",
+        f"; estimated printing time (s) = {time_s:.0f}",
+        f"; estimated printing time = {format_duration(time_s)}",
+        f"; filament used [mm] = {filament:.2f}",
+        f"; filament used [g] = {grams:.2f}",
+        f"; layer count = {len(layers)}",
+        f"; layer height = {settings.layer_height}, first layer height = {settings.first_layer_height}",
+        f"; line width = {settings.width(profile.nozzle_diameter)}, perimeters = {settings.perimeters}, "
+        f"infill = {settings.infill:g}% {settings.infill_pattern}",
+        *(f"; {h}" for h in (header or [])),
+        "",
+        "M107",
+    ]
+    if bed > 0:
+        head.append(f"M140 S{bed:.0f} ; bed")
+    head.append(f"M104 S{hot:.0f} ; hotend")
+    head.extend(profile.start_gcode.splitlines())
+    if bed > 0:
+        head.append(f"M190 S{bed:.0f} ; wait for bed")
+    head += [f"M109 S{hot:.0f} ; wait for hotend", "G21 ; millimetres", "G90 ; absolute positions",
+             "M82 ; absolute extrusion", "G92 E0"]
+    tail = profile.end_gcode.splitlines()
+    return "\n".join(head + body + tail) + "\n", stats
+
+
+# ---------------------------------------------------------------- parser
+
+MOVE_KINDS = ("perimeter", "infill", "skirt", "travel", "other")
+
+
+def feature_kind(type_name: str) -> str:
+    """Our move kind for a `;TYPE:` name (ours, PrusaSlicer's or Cura's)."""
+    t = type_name.strip().lower()
+    if "skirt" in t or "brim" in t:
+        return "skirt"
+    if "perimeter" in t or "wall" in t or "overhang" in t:
+        return "perimeter"
+    if "infill" in t or "fill" in t or "skin" in t or "gap" in t:
+        return "infill"
+    return "other"
+
+
+@dataclass
+class Move:
+    """One straight move: `kind` (perimeter, infill, skirt, travel, other), start and end (x, y, z) in mm,
+    `e` the filament pushed (mm, > 0 when extruding)."""
+
+    kind: str
+    start: tuple[float, float, float]
+    end: tuple[float, float, float]
+    e: float = 0.0
+
+    @property
+    def extruding(self) -> bool:
+        return self.e > 1e-9 and self.kind != "travel"
+
+
+@dataclass
+class GcodeLayer:
+    """One layer of a parsed file: its index (0-based, file order), z (mm) and moves."""
+
+    index: int
+    z: float
+    moves: list[Move] = field(default_factory=list)
+
+    def segments(self, kinds=("perimeter", "infill", "skirt", "other"), extruding: bool = True) -> np.ndarray:
+        """(N, 2, 3) array of the moves of these kinds (extruding ones only unless `extruding` is False)."""
+        sel = [(m.start, m.end) for m in self.moves if m.kind in kinds and (m.extruding or not extruding)]
+        return np.asarray(sel, dtype=float).reshape(-1, 2, 3)
+
+    @property
+    def filament_mm(self) -> float:
+        return float(sum(m.e for m in self.moves if m.e > 0 and m.kind != "travel"))
+
+
+_WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
+
+
+def parse_gcode(text: str) -> list[GcodeLayer]:
+    """Layers of G-code text with their moves (G0/G1 in G90/G91 and M82/M83, G92 respected).
+
+    A layer starts at `;LAYER:n` or `;LAYER_CHANGE`; a file with neither is cut
+    into layers where extrusion first happens at a new z. Moves before the first
+    layer (start code) are dropped; a pure retraction is not a move; an
+    extruding move has its feature's kind, a move without extrusion is travel.
+    """
+    marker = ";LAYER:" if ";LAYER:" in text else (";LAYER_CHANGE" if ";LAYER_CHANGE" in text else None)
+    has_markers = marker is not None
+    z_comment = math.nan  # a `;Z:` seen since the last layer start (PrusaSlicer writes it before `;LAYER:`)
+    layers: list[GcodeLayer] = []
+    x = y = z = e = 0.0
+    abs_xyz = abs_e = True
+    kind = "other"
+    for raw in text.splitlines():
+        line = raw.strip()
+        if not line:
+            continue
+        if line[0] == ";":
+            c = line[1:].strip()
+            if (marker == ";LAYER:" and c.startswith("LAYER:")) or (marker == ";LAYER_CHANGE" and c == "LAYER_CHANGE"):
+                layers.append(GcodeLayer(index=len(layers), z=z_comment))
+                z_comment = math.nan
+            elif c.startswith("Z:"):
+                try:
+                    zc = float(c[2:])
+                except ValueError:
+                    continue
+                if layers and math.isnan(layers[-1].z):
+                    layers[-1].z = zc
+                else:
+                    z_comment = zc
+            elif c.startswith("TYPE:"):
+                kind = feature_kind(c[5:])
+            continue
+        code = line.split(";", 1)[0].strip()
+        if not code:
+            continue
+        head = code.split(None, 1)[0].upper()
+        if head in ("G0", "G1", "G00", "G01"):
+            words = {k.upper(): float(v) for k, v in _WORD.findall(code[len(head):])}
+            nx = (words["X"] if abs_xyz else x + words["X"]) if "X" in words else x
+            ny = (words["Y"] if abs_xyz else y + words["Y"]) if "Y" in words else y
+            nz = (words["Z"] if abs_xyz else z + words["Z"]) if "Z" in words else z
+            de = 0.0
+            if "E" in words:
+                de = words["E"] - e if abs_e else words["E"]
+                e = words["E"] if abs_e else e + words["E"]
+            moved = nx != x or ny != y or nz != z
+            if moved:
+                extruding = de > 0 and (nx != x or ny != y)
+                if not has_markers and extruding and (not layers or abs(nz - layers[-1].z) > 1e-6):
+                    layers.append(GcodeLayer(index=len(layers), z=nz))
+                if layers:
+                    mk = (kind if kind != "travel" else "other") if extruding else "travel"
+                    layers[-1].moves.append(Move(mk, (x, y, z), (nx, ny, nz), de if extruding else 0.0))
+                    if extruding and math.isnan(layers[-1].z):
+                        layers[-1].z = nz
+            x, y, z = nx, ny, nz
+        elif head == "G90":
+            abs_xyz = True
+        elif head == "G91":
+            abs_xyz = False
+        elif head == "M82":
+            abs_e = True
+        elif head == "M83":
+            abs_e = False
+        elif head == "G92":
+            words = {k.upper(): float(v) for k, v in _WORD.findall(code[len(head):])}
+            x, y, z, e = words.get("X", x), words.get("Y", y), words.get("Z", z), words.get("E", e)
+            if not words:
+                x = y = z = e = 0.0
+        elif head == "G28":
+            axes = code[len(head):].upper()
+            if not any(a in axes for a in "XYZ"):
+                x = y = z = 0.0
+            else:
+                x = 0.0 if "X" in axes else x
+                y = 0.0 if "Y" in axes else y
+                z = 0.0 if "Z" in axes else z
+    return layers
+
+
+_STAT_PATTERNS = {
+    "filament_mm": re.compile(r"^;\s*filament used \[mm\]\s*=\s*([\d.]+)", re.M),
+    "filament_g": re.compile(r"^;\s*(?:total )?filament used \[g\]\s*=\s*([\d.]+)", re.M),
+    "print_time_s": re.compile(r"^;\s*estimated printing time \(s\)\s*=\s*([\d.]+)", re.M),
+}
+_PRUSA_TIME = re.compile(r"^;\s*estimated printing time \(normal mode\)\s*=\s*(.+)$", re.M)
+
+
+def read_stats(text: str) -> dict:
+    """Filament (mm, g) and print time (s) from a G-code header or footer (ours or PrusaSlicer's)."""
+    out = {}
+    for key, pat in _STAT_PATTERNS.items():
+        m = pat.search(text)
+        if m:
+            out[key] = float(m.group(1))
+    m = _PRUSA_TIME.search(text)
+    if "print_time_s" not in out and m:
+        total = 0.0
+        for value, unit in re.findall(r"(\d+)\s*([dhms])", m.group(1)):
+            total += int(value) * {"d": 86400, "h": 3600, "m": 60, "s": 1}[unit]
+        out["print_time_s"] = total
+    return out

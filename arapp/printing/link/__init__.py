@@ -1,0 +1,27 @@
+"""Printer links: Marlin over USB serial, and OctoPrint's REST API.
+
+`SerialPrinter` and `OctoPrintLink` share the `PrintLink` interface and report
+`Progress` (lines, layer, percent, ETA, temperatures).
+"""
+
+from .base import LinkError, LinkLost, PrinterHalted, PrinterReset, PrintLink, Progress
+from .job import JobFileError, JobState, Program, cancel_commands, resume_commands
+
+__all__ = [
+    "LinkError", "LinkLost", "PrinterHalted", "PrinterReset", "PrintLink", "Progress",
+    "JobFileError", "JobState", "Program", "cancel_commands", "resume_commands",
+    "SerialPrinter", "OctoPrintLink",
+]
+
+
+def __getattr__(name):
+    # Imported on use: pyserial / HTTP code stays out of `import arapp.printing.link`.
+    if name == "SerialPrinter":
+        from .serial_link import SerialPrinter
+
+        return SerialPrinter
+    if name == "OctoPrintLink":
+        from .octoprint import OctoPrintLink
+
+        return OctoPrintLink
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,304 @@
+"""A print job's program and state: what runs, how far it got, how to resume it.
+
+`Program` is the G-code prepared for streaming: the commands (comments and
+blank lines removed) with their source line index and layer (`;LAYER:n`
+comments, or PrusaSlicer's `;LAYER_CHANGE`). `JobState` is what a host knows
+about the printer after the last executed command: source line, layer,
+position (bed frame, mm), positioning modes, heater targets and readings, fan.
+It is saved as JSON (`arapp-printjob/1`) so a print whose link dropped can be
+resumed (`resume_commands`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from .protocol import clean_command
+
+JOB_FORMAT = "arapp-printjob/1"
+
+_LAYER = re.compile(r";\s*LAYER\s*:\s*(-?\d+)", re.IGNORECASE)
+_LAYER_CHANGE = re.compile(r";\s*LAYER_CHANGE\b", re.IGNORECASE)
+_WORD = re.compile(r"([A-Z])\s*(-?\d*\.?\d+)")
+_HEATING = {"M104", "M109", "M140", "M190"}
+
+
+class JobFileError(ValueError):
+    """A job file that cannot be read or does not match its G-code."""
+
+
+@dataclass
+class Command:
+    """One command to stream: source line index (0-based), text, layer (-1: before the first)."""
+
+    index: int
+    text: str
+    layer: int
+
+
+@dataclass
+class Program:
+    """G-code prepared for streaming."""
+
+    commands: list[Command]
+    source_lines: int
+    layer_count: int
+    sha256: str
+
+    @classmethod
+    def from_lines(cls, lines) -> "Program":
+        """Prepare raw G-code lines (with or without newlines)."""
+        commands: list[Command] = []
+        layer = -1
+        layers_seen = set()
+        digest = hashlib.sha256()
+        count = 0
+        for index, raw in enumerate(lines):
+            count += 1
+            raw = raw.rstrip("\r\n")
+            digest.update(raw.encode("utf-8", errors="replace") + b"\n")
+            m = _LAYER.search(raw)
+            if m and not raw.lstrip().startswith(("G", "M", "T")):
+                layer = int(m.group(1))
+                layers_seen.add(layer)
+            elif _LAYER_CHANGE.search(raw):
+                layer += 1
+                layers_seen.add(layer)
+            text = clean_command(raw)
+            if not text:
+                continue
+            if "*" in text:
+                raise ValueError(
+                    f"G-code line {index + 1} contains '*', which the serial protocol "
+                    f"reserves for the checksum: {raw!r}"
+                )
+            commands.append(Command(index, text, layer))
+        layer_count = (max(layers_seen) + 1) if layers_seen else 0
+        return cls(commands, count, layer_count, digest.hexdigest())
+
+    @classmethod
+    def from_file(cls, path) -> "Program":
+        with open(path, encoding="utf-8", errors="replace") as f:
+            return cls.from_lines(f)
+
+    def position_of(self, source_index: int) -> int:
+        """Index into `commands` of the first command at or after a source line."""
+        lo, hi = 0, len(self.commands)
+        while lo < hi:
+            mid = (lo + hi) // 2
+            if self.commands[mid].index < source_index:
+                lo = mid + 1
+            else:
+                hi = mid
+        return lo
+
+
+@dataclass
+class JobState:
+    """The printer's state after the last executed command of a job.
+
+    `next_line` is the 0-based source line to continue from (every command
+    before it was acknowledged by the printer as executed). Position in the
+    bed frame, millimetres; `e` in the extruder's current mode; `f` in mm/min.
+    Temperatures in degrees C: targets as commanded, readings as last reported.
+    """
+
+    gcode: str = ""
+    gcode_sha256: str = ""
+    source_lines: int = 0
+    next_line: int = 0
+    commands_done: int = 0
+    commands_total: int = 0
+    layer: int = -1
+    layer_count: int = 0
+    x: float | None = None
+    y: float | None = None
+    z: float | None = None
+    e: float = 0.0
+    f: float | None = None
+    absolute_xyz: bool = True
+    absolute_e: bool = True
+    hotend_target: float = 0.0
+    bed_target: float = 0.0
+    hotend: float | None = None
+    bed: float | None = None
+    fan: int = 0
+    status: str = "new"
+    message: str = ""
+    port: str = ""
+    baud: int = 0
+    updated: float = field(default_factory=time.time)
+
+    # -- tracking -------------------------------------------------------------
+    def apply(self, command: Command) -> None:
+        """Update the state for a command the printer has executed."""
+        self.next_line = command.index + 1
+        self.commands_done += 1
+        self.layer = command.layer
+        words = command.text.split(None, 1)
+        code = words[0].upper()
+        args = dict((k, float(v)) for k, v in _WORD.findall(words[1].upper())) if len(words) > 1 else {}
+        if code in ("G0", "G1", "G2", "G3"):
+            for axis in ("X", "Y", "Z"):
+                if axis in args:
+                    current = getattr(self, axis.lower())
+                    value = args[axis]
+                    if not self.absolute_xyz and current is not None:
+                        value += current
+                    setattr(self, axis.lower(), value)
+            if "E" in args:
+                self.e = args["E"] if self.absolute_e else self.e + args["E"]
+            if "F" in args:
+                self.f = args["F"]
+        elif code == "G92":
+            for axis in ("X", "Y", "Z"):
+                if axis in args:
+                    setattr(self, axis.lower(), args[axis])
+            if "E" in args:
+                self.e = args["E"]
+        elif code == "G28":
+            axes = [a for a in ("X", "Y", "Z") if a in words[-1].upper()] if len(words) > 1 else []
+            for axis in axes or ["X", "Y", "Z"]:
+                setattr(self, axis.lower(), 0.0)
+        elif code == "G90":
+            self.absolute_xyz = True
+            self.absolute_e = True
+        elif code == "G91":
+            self.absolute_xyz = False
+            self.absolute_e = False
+        elif code == "M82":
+            self.absolute_e = True
+        elif code == "M83":
+            self.absolute_e = False
+        elif code in ("M104", "M109") and "S" in args:
+            self.hotend_target = args["S"]
+        elif code in ("M140", "M190") and "S" in args:
+            self.bed_target = args["S"]
+        elif code == "M106":
+            self.fan = int(args.get("S", 255))
+        elif code == "M107":
+            self.fan = 0
+
+    def read_temperatures(self, temps: dict) -> None:
+        """Take heater readings from a reply ({"T": (actual, target), "B": ...})."""
+        hot = temps.get("T", temps.get("T0"))
+        if hot is not None:
+            self.hotend = hot[0]
+        if "B" in temps:
+            self.bed = temps["B"][0]
+
+    # -- files ----------------------------------------------------------------
+    def to_dict(self) -> dict:
+        return {"format": JOB_FORMAT, **asdict(self)}
+
+    def save(self, path) -> None:
+        """Write atomically (a crash mid-write leaves the previous file)."""
+        path = Path(path)
+        self.updated = time.time()
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n", encoding="utf-8")
+        os.replace(tmp, path)
+
+    @classmethod
+    def load(cls, path) -> "JobState":
+        try:
+            data = json.loads(Path(path).read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise JobFileError(f"cannot read print job {path}: {exc}") from exc
+        if not isinstance(data, dict) or data.get("format") != JOB_FORMAT:
+            raise JobFileError(f"{path} is not an {JOB_FORMAT} job file (key 'format')")
+        data.pop("format")
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise JobFileError(f"{path}: unknown key(s) {', '.join(unknown)}")
+        return cls(**data)
+
+    def check_program(self, program: Program, path) -> None:
+        """Refuse to resume a job whose G-code file changed since it was saved."""
+        if self.gcode_sha256 and program.sha256 != self.gcode_sha256:
+            raise JobFileError(
+                f"the G-code {path} changed since the job was saved (sha256 differs); "
+                "resume with the original file"
+            )
+
+
+def new_state(program: Program, gcode_path: str = "") -> JobState:
+    """The state before the first command of `program`."""
+    return JobState(
+        gcode=str(gcode_path),
+        gcode_sha256=program.sha256,
+        source_lines=program.source_lines,
+        commands_total=len(program.commands),
+        layer_count=program.layer_count,
+    )
+
+
+def resume_commands(state: JobState, *, z_lift: float = 2.0, bed_height: float | None = None) -> list[str]:
+    """G-code that brings the printer back to `state` before the job continues.
+
+    Heats the bed and hotend to their saved targets (waiting), takes the saved
+    Z as the current Z (the printer may have lost its position; the nozzle has
+    not moved since the link dropped), lifts it by `z_lift` mm, homes X and Y
+    (never Z: that would drive the nozzle into the part), moves back above the
+    saved point, lowers to Z, restores the extruder position, feed rate, fan and
+    positioning modes.
+    """
+    if state.z is None or state.x is None or state.y is None:
+        raise JobFileError(
+            "the job has no known nozzle position (it stopped before the first move); start it again instead"
+        )
+    lift = z_lift if bed_height is None else max(0.0, min(z_lift, bed_height - state.z))
+    out = []
+    if state.bed_target > 0:
+        out.append(f"M190 S{state.bed_target:g}")
+    if state.hotend_target > 0:
+        out.append(f"M109 S{state.hotend_target:g}")
+    out += [
+        "G90",
+        f"G92 Z{state.z:.3f}",
+        f"G1 Z{state.z + lift:.3f} F600",
+        "G28 X Y",
+        f"G1 X{state.x:.3f} Y{state.y:.3f} F3000",
+        f"G1 Z{state.z:.3f} F600",
+        "M82" if state.absolute_e else "M83",
+        f"G92 E{state.e:.5f}",
+    ]
+    if state.fan:
+        out.append(f"M106 S{state.fan}")
+    if state.f:
+        out.append(f"G1 F{state.f:g}")
+    if not state.absolute_xyz:
+        out.append("G91")
+    return out
+
+
+def cancel_commands(state: JobState, *, z_lift: float = 10.0, bed_height: float | None = None) -> list[str]:
+    """G-code for a cancelled print: heaters off, fan off, nozzle up, motors off.
+
+    Heats nothing. The lift is relative, `z_lift` mm, less where the bed
+    height (mm) would be exceeded.
+    """
+    lift = z_lift
+    if bed_height is not None and state.z is not None:
+        lift = max(0.0, min(z_lift, bed_height - state.z))
+    out = ["M104 S0", "M140 S0", "M107"]
+    if lift > 0:
+        out += ["G91", f"G1 Z{lift:g} F600", "G90"]
+    out.append("M84")
+    return out
+
+
+def is_heating(command: str) -> bool:
+    """True for a command that sets a non-zero heater target."""
+    words = command.split()
+    if not words or words[0].upper() not in _HEATING:
+        return False
+    args = dict((k, float(v)) for k, v in _WORD.findall(" ".join(words[1:]).upper()))
+    return args.get("S", args.get("R", 0.0)) > 0

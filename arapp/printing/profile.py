@@ -1,0 +1,225 @@
+"""Printer profiles (`arapp-printer/1`, shared/PRINTER_PROFILE.md): bed size, nozzle, filament, G-code, link, bed anchor.
+
+Lengths are millimetres except the bed anchor's own marker sizes (metres, as in
+RECORDING_FORMAT.md). `bed_from_anchor` maps the anchor frame, taken in
+millimetres, to the bed frame (the printer's G-code coordinates).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+FORMAT = "arapp-printer/1"
+PROFILES_DIR = Path(__file__).with_name("profiles")
+GENERIC_PATH = PROFILES_DIR / "generic.json"
+
+
+class ProfileError(ValueError):
+    """A printer profile that cannot be used; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class BedSize:
+    """Build volume in millimetres: x (width), y (depth), z (height)."""
+
+    width: float
+    depth: float
+    height: float
+
+
+@dataclass(frozen=True)
+class LinkSettings:
+    """Default serial link of the printer."""
+
+    port: str
+    baud: int
+
+
+@dataclass
+class PrinterProfile:
+    """A parsed, checked printer profile."""
+
+    name: str
+    bed: BedSize
+    nozzle_diameter: float
+    filament_diameter: float
+    flavor: str
+    start_gcode: str
+    end_gcode: str
+    link: LinkSettings
+    bed_anchor: object | None          # tracking.session.AnchorSpec, or None
+    bed_from_anchor: np.ndarray | None  # 4x4, anchor frame (mm) -> bed frame (mm)
+    source: str = "<generic>"
+    raw: dict = field(default_factory=dict, repr=False)
+
+    @property
+    def bed_center(self) -> tuple[float, float]:
+        """Centre of the bed in bed coordinates (mm)."""
+        return (self.bed.width / 2.0, self.bed.depth / 2.0)
+
+    @property
+    def filament_area(self) -> float:
+        """Filament cross-section in mm²."""
+        return math.pi * (self.filament_diameter / 2.0) ** 2
+
+    def to_dict(self) -> dict:
+        """The profile as its JSON object (defaults filled in)."""
+        return copy.deepcopy(self.raw)
+
+
+# Types of the top-level keys; nested blocks are checked below.
+_TOP = {
+    "format": str, "name": str, "bed": dict, "nozzle_diameter": float, "filament_diameter": float,
+    "flavor": str, "start_gcode": str, "end_gcode": str, "link": dict, "bed_anchor": dict,
+}
+_BED = {"width": float, "depth": float, "height": float}
+_LINK = {"port": str, "baud": int}
+_FLAVORS = ("marlin",)
+
+
+def _check(value, typ, where: str, src: str):
+    if typ is float:
+        if not (isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)):
+            raise ProfileError(f"{src}: {where}: must be a number, got {value!r}")
+        return float(value)
+    if typ is int:
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise ProfileError(f"{src}: {where}: must be an integer, got {value!r}")
+        return value
+    if not isinstance(value, typ):
+        raise ProfileError(f"{src}: {where}: must be a {'object' if typ is dict else typ.__name__}, got {value!r}")
+    return value
+
+
+def _read_json(path: Path) -> dict:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ProfileError(f"cannot read printer profile {path}: {exc.strerror or exc}") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ProfileError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}): {exc.msg}") from None
+    if not isinstance(data, dict):
+        raise ProfileError(f"{path}: a printer profile must be a JSON object")
+    return data
+
+
+def parse_profile(data: dict, source: str = "<profile>", defaults: dict | None = None) -> PrinterProfile:
+    """A `PrinterProfile` from a profile's JSON object; missing values take `defaults` (the generic printer's).
+
+    Raises ProfileError naming the key for an unknown key, a wrong type or a bad value.
+    """
+    if not isinstance(data, dict):
+        raise ProfileError(f"{source}: a printer profile must be a JSON object")
+    for key in data:
+        if key not in _TOP:
+            raise ProfileError(f"{source}: {key}: unknown key; known keys are {', '.join(_TOP)}")
+    for key in ("format", "name", "bed"):
+        if key not in data:
+            raise ProfileError(f"{source}: {key}: missing (a printer profile needs format, name and bed)")
+    for key, typ in _TOP.items():
+        if key in data:
+            data_value = _check(data[key], typ, key, source)
+            if typ is float and data_value <= 0:
+                raise ProfileError(f"{source}: {key}: must be positive (millimetres), got {data_value}")
+    if data["format"] != FORMAT:
+        raise ProfileError(f"{source}: format: must be {FORMAT!r}, got {data['format']!r}")
+    merged = copy.deepcopy(defaults or {})
+    merged.update(copy.deepcopy(data))
+
+    bed = merged["bed"]
+    for key in bed:
+        if key not in _BED:
+            raise ProfileError(f"{source}: bed.{key}: unknown key; the bed has width, depth and height (mm)")
+    dims = {}
+    for key in _BED:
+        if key not in bed:
+            raise ProfileError(f"{source}: bed.{key}: missing (the bed needs width, depth and height in mm)")
+        dims[key] = _check(bed[key], float, f"bed.{key}", source)
+        if dims[key] <= 0:
+            raise ProfileError(f"{source}: bed.{key}: must be positive (millimetres), got {dims[key]}")
+
+    link_block = dict((defaults or {}).get("link", {}))
+    link_block.update(data.get("link", {}))
+    for key in data.get("link", {}):
+        if key not in _LINK:
+            raise ProfileError(f"{source}: link.{key}: unknown key; the link has port and baud")
+    for key, typ in _LINK.items():
+        if key not in link_block:
+            raise ProfileError(f"{source}: link.{key}: missing")
+        _check(link_block[key], typ, f"link.{key}", source)
+    if link_block["baud"] <= 0:
+        raise ProfileError(f"{source}: link.baud: must be positive, got {link_block['baud']}")
+    merged["link"] = link_block
+
+    if merged.get("flavor") not in _FLAVORS:
+        raise ProfileError(f"{source}: flavor: {merged.get('flavor')!r} is not supported; use one of {', '.join(_FLAVORS)}")
+
+    anchor, bed_from_anchor = None, None
+    if merged.get("bed_anchor") is not None:
+        anchor, bed_from_anchor = _parse_bed_anchor(merged["bed_anchor"], source)
+
+    return PrinterProfile(
+        name=merged["name"],
+        bed=BedSize(**dims),
+        nozzle_diameter=float(merged["nozzle_diameter"]),
+        filament_diameter=float(merged["filament_diameter"]),
+        flavor=merged["flavor"],
+        start_gcode=merged["start_gcode"],
+        end_gcode=merged["end_gcode"],
+        link=LinkSettings(port=link_block["port"], baud=int(link_block["baud"])),
+        bed_anchor=anchor,
+        bed_from_anchor=bed_from_anchor,
+        source=source,
+        raw=merged,
+    )
+
+
+def _parse_bed_anchor(block: dict, source: str):
+    """The bed anchor as an AnchorSpec plus its 4x4 `bed_from_anchor` (mm)."""
+    from tracking.errors import SessionError
+    from tracking.session import parse_anchor, parse_rigid
+
+    block = dict(block)
+    bed_from_anchor = np.eye(4)
+    if "bed_from_anchor" in block:
+        try:
+            bed_from_anchor = parse_rigid(block.pop("bed_from_anchor"), "bed_anchor.bed_from_anchor")
+        except SessionError as exc:
+            raise ProfileError(f"{source}: {exc}") from None
+    try:
+        anchor = parse_anchor(block, "bed_anchor")
+    except SessionError as exc:
+        raise ProfileError(f"{source}: {exc}") from None
+    return anchor, bed_from_anchor
+
+
+def shipped_profiles() -> list[str]:
+    """Names of the profiles shipped with arapp (usable as `--printer NAME`)."""
+    return sorted(p.stem for p in PROFILES_DIR.glob("*.json"))
+
+
+def load_profile(path: str | Path | None = None) -> PrinterProfile:
+    """Load a printer profile from a JSON file, or a shipped one by name; None gives the generic printer.
+
+    Values the file omits take the generic 250 x 210 x 210 mm Marlin printer's.
+    """
+    generic = _read_json(GENERIC_PATH)
+    if path is None:
+        return parse_profile(generic, str(GENERIC_PATH))
+    p = Path(path)
+    if not p.exists() and p.suffix == "" and (PROFILES_DIR / f"{p.name}.json").exists():
+        p = PROFILES_DIR / f"{p.name}.json"
+    if not p.exists():
+        raise ProfileError(
+            f"printer profile {str(path)!r} not found: give a JSON file (shared format {FORMAT}) "
+            f"or a shipped profile name ({', '.join(shipped_profiles())})"
+        )
+    return parse_profile(_read_json(p), str(p), defaults=generic)

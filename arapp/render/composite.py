@@ -1,0 +1,71 @@
+"""Alpha compositing and lens-distortion warping of overlay crops (numpy/OpenCV, no per-pixel Python).
+
+Overlay crops are premultiplied RGBA uint8 (colour already multiplied by alpha), which is what the
+GPU produces with premultiplied blending and MSAA resolve, and what interpolates correctly when
+warped. The public `render()` result is straight (non-premultiplied) RGBA.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+
+def over_bgr(frame_bgr: np.ndarray, premul_rgba: np.ndarray, x0: int, y0: int) -> None:
+    """Composite a premultiplied RGBA crop over `frame_bgr` in place, with its top-left at (x0, y0).
+
+    out = fg + bg * (1 - alpha), only inside the crop; pixels with alpha 0 are left bit-exact.
+    The crop must lie inside the frame.
+    """
+    h, w = premul_rgba.shape[:2]
+    roi = frame_bgr[y0:y0 + h, x0:x0 + w]
+    alpha = premul_rgba[..., 3]
+    if not alpha.any():
+        return
+    fg = premul_rgba[..., 2::-1].astype(np.float32)  # RGB -> BGR
+    inv = (255.0 - alpha.astype(np.float32))[..., None] * (1.0 / 255.0)
+    out = roi.astype(np.float32) * inv + fg
+    np.clip(out + 0.5, 0.0, 255.0, out=out)
+    roi[...] = out.astype(np.uint8)
+
+
+def unpremultiply(premul_rgba: np.ndarray) -> np.ndarray:
+    """Straight-alpha RGBA uint8 from premultiplied RGBA uint8 (colour undefined -> 0 where alpha is 0)."""
+    a = premul_rgba[..., 3:4].astype(np.float32)
+    rgb = premul_rgba[..., :3].astype(np.float32) * (255.0 / np.maximum(a, 1.0))
+    out = np.empty_like(premul_rgba)
+    out[..., :3] = np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
+    out[..., 3] = premul_rgba[..., 3]
+    out[..., :3][premul_rgba[..., 3] == 0] = 0
+    return out
+
+
+def warp_crop(premul_rgba: np.ndarray, src_xy: tuple[np.ndarray, np.ndarray], src_origin: tuple[int, int]) -> np.ndarray:
+    """Resample an undistorted crop into distorted pixels.
+
+    `src_xy` = (map_x, map_y) float32 (h, w): for each output (distorted) pixel, its position in the
+    undistorted image (Camera.distort_maps() sliced to the output region); `src_origin` = (x0, y0) of
+    the undistorted crop. Bilinear, transparent outside the crop.
+    """
+    mx = src_xy[0] - np.float32(src_origin[0])
+    my = src_xy[1] - np.float32(src_origin[1])
+    return cv2.remap(premul_rgba, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0, 0))
+
+
+def draw_status(frame_bgr: np.ndarray, text: str, corner: str = "top-left", scale: float = 0.5) -> np.ndarray:
+    """Write a one-line status (e.g. "tracking  29.8 fps") on a dark translucent box in a corner, in place.
+
+    corner: "top-left", "top-right", "bottom-left" or "bottom-right". Returns the frame.
+    """
+    if corner not in ("top-left", "top-right", "bottom-left", "bottom-right"):
+        raise ValueError(f"corner must be top-left, top-right, bottom-left or bottom-right, got {corner!r}")
+    font, thick, margin = cv2.FONT_HERSHEY_SIMPLEX, 1, 6
+    (tw, th), base = cv2.getTextSize(text, font, scale, thick)
+    h, w = frame_bgr.shape[:2]
+    bw, bh = min(tw + 2 * margin, w), min(th + base + 2 * margin, h)
+    x0 = 0 if corner.endswith("left") else w - bw
+    y0 = 0 if corner.startswith("top") else h - bh
+    roi = frame_bgr[y0:y0 + bh, x0:x0 + bw]
+    roi[...] = (roi.astype(np.uint16) * 2 // 5).astype(np.uint8)  # darken to 40% so any background reads
+    cv2.putText(frame_bgr, text, (x0 + margin, y0 + margin + th), font, scale, (255, 255, 255), thick, cv2.LINE_AA)
+    return frame_bgr

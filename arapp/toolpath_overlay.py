@@ -1,0 +1,120 @@
+"""Sliced toolpaths drawn in AR on the real printer bed (the print preview).
+
+The recording's (or live session's) first anchor is the printer's bed anchor;
+the printer profile's `bed_from_anchor` (PRINTER_PROFILE.md) places it on the
+bed. Toolpaths are G-code coordinates in the bed frame (millimetres); this
+module turns them into coloured line sets for `arapp.render.OverlayRenderer`
+and gives the transform from the bed frame to the world (metres).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+# RGBA per move kind: perimeters warm, infill cool, travel faint, skirt grey.
+KIND_COLOURS = {
+    "perimeter": (1.0, 0.55, 0.1, 1.0),
+    "infill": (0.15, 0.75, 1.0, 1.0),
+    "skirt": (0.8, 0.8, 0.8, 1.0),
+    "other": (0.9, 0.9, 0.3, 1.0),
+    "travel": (0.6, 0.6, 0.6, 0.35),
+}
+DIM_ALPHA = 0.25
+CURRENT_COLOUR = (1.0, 0.2, 0.8, 1.0)  # the layer being printed, during a print
+OUT_OF_BED_COLOUR = (1.0, 0.1, 0.1, 1.0)
+BED_OUTLINE_COLOUR = (0.2, 1.0, 0.3, 0.9)
+
+
+def world_from_bed(world_from_bed_anchor: np.ndarray, bed_from_anchor_mm: np.ndarray) -> np.ndarray:
+    """4x4 similarity from bed coordinates (mm) to the world (metres).
+
+    world_from_bed_anchor: the bed anchor's pose in the world (metres), identity
+    when it is the session's first anchor; bed_from_anchor_mm: the profile's
+    transform, anchor frame taken in millimetres -> bed frame in millimetres.
+    """
+    anchor_mm_from_bed = np.linalg.inv(np.asarray(bed_from_anchor_mm, dtype=float))
+    m_from_mm = np.diag([1e-3, 1e-3, 1e-3, 1.0])
+    return np.asarray(world_from_bed_anchor, dtype=float) @ m_from_mm @ anchor_mm_from_bed
+
+
+def bed_outline(width_mm: float, depth_mm: float) -> np.ndarray:
+    """Closed polyline (5, 3) of the bed's build area at z = 0, bed frame (mm)."""
+    return np.array([[0, 0, 0], [width_mm, 0, 0], [width_mm, depth_mm, 0], [0, depth_mm, 0], [0, 0, 0]], float)
+
+
+def out_of_bed(segments: np.ndarray, width_mm: float, depth_mm: float, height_mm: float | None = None,
+               tol: float = 1e-6) -> np.ndarray:
+    """Boolean mask (N,) of the (N, 2, 3) segments that leave the build volume."""
+    s = np.asarray(segments, dtype=float).reshape(-1, 2, 3)
+    lo = (s[..., 0] < -tol) | (s[..., 1] < -tol)
+    hi = (s[..., 0] > width_mm + tol) | (s[..., 1] > depth_mm + tol)
+    if height_mm is not None:
+        hi |= s[..., 2] > height_mm + tol
+    return np.any(lo | hi, axis=1)
+
+
+def toolpath_line_sets(layers, bed_size: tuple[float, float, float], layer: int | None = None,
+                       current: int | None = None, travel: bool = True) -> list:
+    """Line sets (arapp.render LineSet) of parsed G-code layers, in bed coordinates (mm).
+
+    layer: show layers 0..layer with that layer in full colour and those below
+    dimmed (None: all layers in full colour). current: the layer being
+    printed, drawn in `CURRENT_COLOUR` (takes precedence). Moves outside the
+    build volume are drawn red and the bed outline turns red: the warning.
+    """
+    from arapp.render.modes import LineSet
+
+    width, depth, height = bed_size
+    top = len(layers) - 1 if layer is None else min(int(layer), len(layers) - 1)
+    sets = []
+    any_outside = False
+    for gl in layers[: top + 1]:
+        full = layer is None or gl.index == top
+        for kind, rgba in KIND_COLOURS.items():
+            if kind == "travel" and (not travel or not full):
+                continue
+            seg = gl.segments(kinds=(kind,), extruding=kind != "travel")
+            if not len(seg):
+                continue
+            outside = out_of_bed(seg, width, depth, height)
+            any_outside |= bool(outside.any())
+            inside = seg[~outside]
+            colour = rgba if full else (*rgba[:3], rgba[3] * DIM_ALPHA)
+            if current is not None and gl.index == current and kind != "travel":
+                colour = CURRENT_COLOUR
+            width_px = 1.0 if kind == "travel" else (2.0 if full else 1.0)
+            if len(inside):
+                sets.append(LineSet(list(inside), colour, width_px, 0.0))
+            if outside.any():
+                sets.append(LineSet(list(seg[outside]), OUT_OF_BED_COLOUR, 3.0, 0.0))
+    outline_colour = OUT_OF_BED_COLOUR if any_outside else BED_OUTLINE_COLOUR
+    sets.append(LineSet([bed_outline(width, depth)], outline_colour, 3.0 if any_outside else 2.0, 0.0))
+    return sets
+
+
+def toolpath_overlay(gcode_path: str | Path, printer_path: str | Path | None, anchors, layer: int | None = None,
+                     current: int | None = None):
+    """(line_sets, world_from_bed) for a G-code file on the bed of a printer profile.
+
+    anchors: the session's anchors; the first is the bed anchor (its frame is the world).
+    """
+    from arapp.printing import load_profile
+    from arapp.printing.gcode import parse_gcode
+
+    path = Path(gcode_path)
+    if not path.is_file():
+        raise FileNotFoundError(f"toolpaths: {path} does not exist; slice a model first (arapp slice MODEL -o {path})")
+    layers = parse_gcode(path.read_text(errors="replace"))
+    if not layers:
+        raise ValueError(f"toolpaths: {path} has no printing moves (no layers found)")
+    if layer is not None and not (0 <= layer < len(layers)):
+        raise ValueError(f"--layer {layer}: {path} has layers 0..{len(layers) - 1}")
+    profile = load_profile(printer_path)
+    if profile.bed_from_anchor is None:
+        raise ValueError(f"printer profile {profile.source} has no bed_anchor; add one with its bed_from_anchor "
+                         f"(see PRINTER_PROFILE.md) so the toolpaths can be placed on the bed")
+    bed = (profile.bed.width, profile.bed.depth, profile.bed.height)
+    sets = toolpath_line_sets(layers, bed, layer, current)
+    return sets, world_from_bed(anchors[0].world_from_anchor, profile.bed_from_anchor)

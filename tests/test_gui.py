@@ -1,0 +1,355 @@
+"""The desktop app, offscreen (pytest-qt): replay, overlay registration, models, edits, print dialog,
+error dialogs, the screenshot flag.
+
+A short synthetic recording with known camera poses is written once per
+session by tracking.recorder; overlay pixels are checked against
+cv2.projectPoints of the model's own vertices at the tracker's pose.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+pytest.importorskip("pytestqt")
+
+from PySide6.QtCore import QSettings, Qt  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+MODELS = ROOT / "models"
+ANCHORS = [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0, "length": 0.08}]
+N_FRAMES = 24
+TIMEOUT_MS = 30000
+
+
+def camera_poses(n: int) -> list[np.ndarray]:
+    """A slow arc around the marker at ~0.35 m, looking at its centre (world_from_camera)."""
+    from tracking.anchors.render import look_at
+
+    poses = []
+    for i in range(n):
+        a = 0.3 + 0.5 * i / max(n - 1, 1)
+        poses.append(look_at([0.22 * np.cos(a), 0.22 * np.sin(a), 0.28], [0.0, 0.0, 0.0]))
+    return poses
+
+
+@pytest.fixture(scope="session")
+def recording(tmp_path_factory) -> Path:
+    from tracking.anchors.render import render_view
+    from tracking.camera import Camera
+    from tracking.recorder import RecordingWriter
+    from tracking.session import parse_anchors
+
+    folder = tmp_path_factory.mktemp("gui") / "arc"
+    cam = Camera(np.array([[560.0, 0, 322.5], [0, 560.0, 236.5], [0, 0, 1]]), np.zeros(5), 640, 480)
+    anchors = parse_anchors(ANCHORS)
+    with RecordingWriter(folder, cam, 30.0, anchors=ANCHORS, source={"kind": "synthetic"}) as w:
+        for i, pose in enumerate(camera_poses(N_FRAMES)):
+            w.write(render_view(anchors, cam, pose, bgr=True), i / 30.0, pose)
+    return folder
+
+
+@pytest.fixture
+def window(qtbot, tmp_path):
+    from arapp.gui.main_window import MainWindow
+
+    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    w = MainWindow(settings=settings)
+    qtbot.addWidget(w)
+    w.show()
+    yield w
+    for box in w.open_error_boxes():
+        box.close()
+    w.close()
+
+
+def wait_model(qtbot, w, name: str) -> None:
+    qtbot.waitUntil(lambda: w.model is not None and Path(w.model_path).name == name, timeout=TIMEOUT_MS)
+
+
+def wait_frames(qtbot, w, n: int) -> None:
+    start = w.frames_painted
+    qtbot.waitUntil(lambda: w.frames_painted >= start + n, timeout=TIMEOUT_MS)
+
+
+def overlay_mask(shown) -> np.ndarray:
+    """Pixels the overlay changed: composited frame against the frame as captured."""
+    diff = np.abs(shown.result.image.astype(np.int16) - shown.frame.astype(np.int16)).max(axis=2)
+    return diff > 12
+
+
+def projected_mask(w, shown) -> tuple[np.ndarray, np.ndarray]:
+    """Filled silhouette of the displayed mesh by cv2.projectPoints at the pose the frame was drawn with,
+    and the projected vertices."""
+    from arapp.placement import world_from_model
+    from tracking.poses import invert
+
+    info = w.source_info
+    mesh = w.mesh_lines[0]
+    wfm = world_from_model(info.anchors[0], w.model)
+    cfm = invert(shown.result.world_from_camera) @ wfm  # a similarity (model units -> metres)
+    in_camera = np.asarray(mesh.vertices, float) @ cfm[:3, :3].T + cfm[:3, 3]
+    assert in_camera[:, 2].min() > 0.05
+    pts, _ = cv2.projectPoints(in_camera, np.zeros(3), np.zeros(3), info.camera.K, info.camera.dist)
+    pts = pts.reshape(-1, 2)
+    mask = np.zeros(shown.frame.shape[:2], np.uint8)
+    tri = np.round(pts[np.asarray(mesh.faces)] * 16).astype(np.int32)
+    for t in tri:
+        cv2.fillConvexPoly(mask, t, 1, lineType=cv2.LINE_8, shift=4)
+    return mask.astype(bool), pts
+
+
+def assert_fits_view(w) -> None:
+    """The painted image has the recording's aspect and fills the view along one side."""
+    q = w.view.image()
+    assert q is not None
+    assert abs(q.width() / q.height() - 640 / 480) < 0.01
+    vw, vh = w.view.width(), w.view.height()
+    assert q.width() <= vw + 1 and q.height() <= vh + 1
+    assert q.width() >= vw - 2 or q.height() >= vh - 2
+
+
+def iou(a: np.ndarray, b: np.ndarray) -> float:
+    return float((a & b).sum()) / max(float((a | b).sum()), 1.0)
+
+
+def test_play_recording_to_the_end(qtbot, window, recording):
+    ended = []
+    window.open_source(str(recording))
+    qtbot.waitUntil(lambda: window.engine is not None and window.source_info is not None, timeout=TIMEOUT_MS)
+    window.engine.ended.connect(lambda: ended.append(True))
+    assert window.source_info.seekable and window.source_info.frame_count == N_FRAMES
+    qtbot.waitUntil(lambda: bool(ended), timeout=TIMEOUT_MS)
+    # latest frame wins, but the last frame is never replaced, so it is the one on screen
+    qtbot.waitUntil(lambda: window.last_shown is not None and window.last_shown.result.index == N_FRAMES - 1,
+                    timeout=TIMEOUT_MS)
+    assert window.frames_painted >= 2
+    assert window.last_shown.result.state in ("marker", "slam")
+    assert window.replay.slider.value() == N_FRAMES - 1
+    assert window.replay.play_button.text() == "Play"
+    assert_fits_view(window)
+    assert all(lat > 0 for lat in window.latencies_ms)
+
+
+def test_replay_controls_step_and_seek(qtbot, window, recording):
+    window.open_source(str(recording))
+    qtbot.waitUntil(lambda: window.source_info is not None, timeout=TIMEOUT_MS)
+    wait_frames(qtbot, window, 1)
+    window.toggle_play()  # pause
+    assert not window.engine.playing
+    window.seek(10)
+    qtbot.waitUntil(lambda: window.last_shown.result.index == 10, timeout=TIMEOUT_MS)
+    window.step()
+    qtbot.waitUntil(lambda: window.last_shown.result.index == 11, timeout=TIMEOUT_MS)
+    assert abs(window.last_shown.result.t - 11 / 30.0) < 1e-3
+    qtbot.wait(200)
+    assert window.last_shown.result.index == 11  # paused: nothing moves on by itself
+
+
+def test_overlay_pixels_where_the_model_projects(qtbot, window, recording):
+    window.open_model(str(MODELS / "sphere.json"))
+    wait_model(qtbot, window, "sphere.json")
+    window.open_source(str(recording))
+    qtbot.waitUntil(lambda: window.source_info is not None, timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: window.last_shown is not None and window.last_shown.result.world_from_camera is not None
+                    and overlay_mask(window.last_shown).sum() > 200, timeout=TIMEOUT_MS)
+    window.engine.pause()
+    qtbot.wait(300)  # a frame in flight lands
+    shown = window.last_shown
+    assert shown.result.world_from_camera is not None
+    # the tracker's pose agrees with the true camera pose of that frame
+    truth = camera_poses(N_FRAMES)[shown.result.index]
+    assert np.linalg.norm(shown.result.world_from_camera[:3, 3] - truth[:3, 3]) < 0.01
+    drawn = overlay_mask(shown)
+    expected, pts = projected_mask(window, shown)
+    assert expected.sum() > 500
+    assert iou(drawn, expected) > 0.9
+    ys, xs = np.nonzero(drawn)
+    ye, xe = np.nonzero(expected)
+    assert np.hypot(xs.mean() - xe.mean(), ys.mean() - ye.mean()) < 2.0
+    # what is painted is the composited frame, scaled to the view in the worker
+    q = window.view.image()
+    from PySide6.QtGui import QImage
+
+    rgb = q.convertToFormat(QImage.Format.Format_BGR888)
+    painted = np.frombuffer(rgb.constBits(), np.uint8).reshape(rgb.height(), rgb.bytesPerLine())
+    painted = painted[:, : 3 * q.width()].reshape(q.height(), q.width(), 3)
+    expected_view = cv2.resize(shown.result.image, (q.width(), q.height()), interpolation=cv2.INTER_AREA)
+    assert np.abs(painted.astype(int) - expected_view.astype(int)).mean() < 1.0
+    assert_fits_view(window)
+
+
+def test_switch_models(qtbot, window, recording):
+    window.open_source(str(recording))
+    qtbot.waitUntil(lambda: window.source_info is not None, timeout=TIMEOUT_MS)
+    window.replay.loop.setChecked(True)
+    window.open_model(str(MODELS / "sphere.json"))
+    wait_model(qtbot, window, "sphere.json")
+    sphere_mesh = window.mesh_lines[0]
+    window.open_model(str(MODELS / "torus.json"))
+    wait_model(qtbot, window, "torus.json")
+    torus_mesh = window.mesh_lines[0]
+    assert window.model.name in window.model_panel.current.text()
+    qtbot.waitUntil(lambda: window.engine.processor is not None and window.engine.processor.pipeline is not None
+                    and window.engine.processor.pipeline.model is window.model
+                    and len(window.engine.processor.pipeline.mesh.faces) == len(torus_mesh.faces), timeout=TIMEOUT_MS)
+    assert torus_mesh is not sphere_mesh
+
+    def torus_drawn():
+        s = window.last_shown
+        if s is None or s.result.world_from_camera is None or s.processed_at < switched_at:
+            return False
+        return iou(overlay_mask(s), projected_mask(window, s)[0]) > 0.85
+
+    import time
+
+    switched_at = time.perf_counter()
+    qtbot.waitUntil(torus_drawn, timeout=TIMEOUT_MS)
+
+
+def test_edit_weight_changes_the_mesh(qtbot, window, recording):
+    from arapp.geometry import load_model
+
+    window.open_source(str(recording))
+    window.open_model(str(MODELS / "rational_5x5.json"))
+    wait_model(qtbot, window, "rational_5x5.json")
+    panel = window.model_panel
+    assert panel.edit_box.isEnabled()
+    before = window.mesh_lines[0]
+    panel.surface_index.setValue(0)
+    panel.u_index.setValue(2)
+    panel.v_index.setValue(2)
+    original = load_model(MODELS / "rational_5x5.json").surfaces[0]
+    assert panel.weight.value() == pytest.approx(original.weights[2, 2])
+    target = original.control_points[2, 2]
+    panel.weight.setValue(20.0)
+    qtbot.waitUntil(lambda: window.mesh_lines[0] is not before, timeout=TIMEOUT_MS)
+    after = window.mesh_lines[0]
+    assert window.model.surfaces[0].weights[2, 2] == pytest.approx(20.0)
+    # raising a weight pulls the surface toward that control point
+    d_before = np.linalg.norm(np.asarray(before.vertices) - target, axis=1).min()
+    d_after = np.linalg.norm(np.asarray(after.vertices) - target, axis=1).min()
+    assert d_after < d_before
+    # and the mesh is that of the edited surface: its vertices lie on it (independent evaluation)
+    edited = window.model.surfaces[0]
+    (u0, u1), (v0, v1) = edited.domain
+    uu, vv = np.meshgrid(np.linspace(u0, u1, 60), np.linspace(v0, v1, 60), indexing="ij")
+    dense = edited.evaluate(uu.ravel(), vv.ravel())
+    sample = np.asarray(after.vertices)[:: max(1, len(after.vertices) // 200)]
+    gap = np.array([np.linalg.norm(dense - p, axis=1).min() for p in sample])
+    assert gap.max() < 0.15
+    qtbot.waitUntil(lambda: window.engine.processor is not None and window.engine.processor.pipeline is not None
+                    and window.engine.processor.pipeline.model is window.model
+                    and window.engine.processor.pipeline.mesh.vertices.shape == after.vertices.shape
+                    and np.allclose(window.engine.processor.pipeline.mesh.vertices, after.vertices), timeout=TIMEOUT_MS)
+
+
+def test_print_dialog_opens_with_the_placed_model(qtbot, window):
+    window.open_model(str(MODELS / "sphere.json"))
+    wait_model(qtbot, window, "sphere.json")
+    window.model_panel.size.setValue(40.0)
+    assert window.placement["size_mm"] == 40.0
+    qtbot.keyClick(window, Qt.Key.Key_P)
+    dlg = window._print_dialog
+    assert dlg is not None and dlg.isVisible()
+    assert dlg.placement["size_mm"] == 40.0
+    qtbot.waitUntil(lambda: dlg.solid is not None, timeout=TIMEOUT_MS)
+    from arapp.printing import load_profile
+
+    ext = dlg.solid.extents
+    assert ext[0] == pytest.approx(40.0, rel=0.02) and ext[1] == pytest.approx(40.0, rel=0.02)
+    assert dlg.solid.bounds[0][2] == pytest.approx(0.0, abs=1e-6)
+    cx, cy = load_profile().bed_center
+    assert dlg.solid.bounds.mean(axis=0)[:2] == pytest.approx([cx, cy], abs=0.5)
+    assert dlg.solid.is_watertight
+    dlg.close()
+
+
+def test_corrupt_model_file_gives_its_dialog(qtbot, window, tmp_path):
+    from arapp.geometry import load_model
+
+    bad = tmp_path / "bad.json"
+    data = json.loads((MODELS / "rational_5x5.json").read_text())
+    text = json.dumps(data).replace("[0, 1, 2, 3, 4, 5, 6, 7]", "[0, 1, 0.5, 3, 4, 5, 6, 7]", 1)
+    bad.write_text(text if text != json.dumps(data) else "{ not json")
+    with pytest.raises(ValueError) as expected:
+        load_model(bad)
+    window.open_model(str(bad))
+    qtbot.waitUntil(lambda: len(window.errors) > 0, timeout=TIMEOUT_MS)
+    title, message = window.errors[-1]
+    assert title == "Cannot open the model"
+    assert message == str(expected.value)
+    boxes = window.open_error_boxes()
+    assert len(boxes) == 1 and boxes[0].isVisible() and boxes[0].text() == message
+    assert window.model is None  # nothing half-loaded
+    boxes[0].accept()
+    qtbot.waitUntil(lambda: not window.open_error_boxes(), timeout=5000)
+
+
+def test_missing_camera_gives_its_dialog(qtbot, window):
+    from arapp.gui.sourcespec import open_spec
+
+    spec = "v4l2:/dev/video63"
+    with pytest.raises((ValueError, OSError, RuntimeError)) as expected:
+        open_spec(spec)
+    window.open_source(spec)
+    qtbot.waitUntil(lambda: len(window.errors) > 0, timeout=TIMEOUT_MS)
+    title, message = window.errors[-1]
+    assert title == "Cannot open source"
+    assert message == str(expected.value)
+    assert window.open_error_boxes()[0].text() == message
+    qtbot.waitUntil(lambda: not window.engine.running, timeout=5000)
+
+
+def test_shortcuts_and_settings(qtbot, window, recording, tmp_path):
+    window.open_source(str(recording))
+    qtbot.waitUntil(lambda: window.source_info is not None, timeout=TIMEOUT_MS)
+    wait_frames(qtbot, window, 1)
+    assert window.engine.playing
+    qtbot.keyClick(window, Qt.Key.Key_Space)
+    assert not window.engine.playing
+    qtbot.keyClick(window, Qt.Key.Key_Space)
+    assert window.engine.playing
+    calls = []
+
+    def spy(p):
+        original = p.reset
+        p.reset = lambda: (calls.append(True), original())
+
+    window.engine.submit(spy)
+    qtbot.keyClick(window, Qt.Key.Key_R)
+    qtbot.waitUntil(lambda: bool(calls), timeout=TIMEOUT_MS)
+    window.model_panel.mode.setCurrentText("wireframe")
+    assert window.settings.value("mode") == "wireframe"
+    assert window._recent("recent_sources")[0] == str(recording)
+    qtbot.waitUntil(lambda: window.engine.processor.pipeline is not None
+                    and window.engine.processor.pipeline.mode == "wireframe", timeout=TIMEOUT_MS)
+
+
+def test_screenshot_flag(recording, tmp_path):
+    out = tmp_path / "shot.png"
+    env = dict(os.environ, QT_QPA_PLATFORM="offscreen", PYOPENGL_PLATFORM="egl",
+               XDG_CONFIG_HOME=str(tmp_path / "config"))
+    proc = subprocess.run([sys.executable, "-m", "arapp", "gui", "--source", str(recording), "--model",
+                           str(MODELS / "sphere.json"), "--frames", "5", "--screenshot", str(out)],
+                          capture_output=True, text=True, timeout=120, env=env, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    img = cv2.imread(str(out))
+    assert img is not None and img.shape[0] > 300 and img.shape[1] > 600
+    assert img.std() > 10  # a real picture, not a blank window
+
+
+def test_screenshot_flag_reports_a_bad_source(tmp_path):
+    env = dict(os.environ, QT_QPA_PLATFORM="offscreen", XDG_CONFIG_HOME=str(tmp_path / "config"))
+    proc = subprocess.run([sys.executable, "-m", "arapp", "gui", "--source", str(tmp_path / "nothing"),
+                           "--frames", "3", "--screenshot", str(tmp_path / "x.png")],
+                          capture_output=True, text=True, timeout=120, env=env, cwd=ROOT)
+    assert proc.returncode != 0
+    assert "nothing" in proc.stderr

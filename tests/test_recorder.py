@@ -1,0 +1,140 @@
+"""Recorder: round trip from a file-backed source, overwrite protection, limits, Ctrl-C, CLI errors."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+
+import numpy as np
+import pytest
+
+from arapp.cli import main
+from tracking.errors import SessionError, SourceError
+from tracking.recorder import RecordingWriter, record
+from tracking.session import load_session
+from tracking.sources import RecordingSource, open_source
+
+from test_sources import CAM, TIMES, frame_image, make_recording  # noqa: E402 - shared fixtures
+
+ANCHORS = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
+            "marker_length": 0.04, "separation": 0.01, "first_id": 0},
+           {"kind": "qr", "text": "arapp anchor 1", "length": 0.06,
+            "world_from_anchor": [[1, 0, 0, 0], [0, 1, 0, 0.3], [0, 0, 1, 0], [0, 0, 0, 1]]}]
+
+
+@pytest.fixture(scope="module")
+def rec(tmp_path_factory):
+    return make_recording(tmp_path_factory.mktemp("rec") / "r")
+
+
+def test_round_trip_from_a_file_backed_source_is_frame_for_frame(rec, tmp_path):
+    out = tmp_path / "copy"
+    with open_source(str(rec)) as src:
+        session = record(src, out, anchors=ANCHORS, fourcc="FFV1", progress=lambda s: None)
+    assert session.folder == out and session.video == "video.mkv"
+    again = load_session(out)  # session.json validates
+    assert again.camera.to_dict() == CAM.to_dict() and again.fps == 30.0
+    assert [a.to_dict() for a in again.anchors] == [a.to_dict() for a in session.anchors]
+    assert again.anchors[1].world_from_anchor[1, 3] == 0.3
+    data = json.loads((out / "session.json").read_text())
+    assert data["format"] == "arapp-recording/1" and data["source"]["recording"] == str(rec)
+    with RecordingSource(rec) as a, RecordingSource(out) as b:
+        fa, fb = list(a), list(b)
+    assert len(fa) == len(fb) == len(TIMES)
+    for x, y in zip(fa, fb):
+        assert x.index == y.index and x.t == pytest.approx(y.t, abs=1e-6)
+        np.testing.assert_array_equal(x.image, y.image)
+    assert (out / "frames.csv").read_text().splitlines()[0] == "frame,t"
+
+
+def test_mjpg_recording_is_close_to_the_source(rec, tmp_path):
+    with open_source(str(rec)) as src:
+        record(src, tmp_path / "m", progress=lambda s: None)  # default MJPG, default anchors
+    with RecordingSource(tmp_path / "m") as b:
+        frames = list(b)
+    assert len(frames) == len(TIMES) and b.session.video == "video.avi"
+    for f in frames:
+        err = np.abs(f.image.astype(float) - frame_image(f.index)).mean()
+        assert err < 4.0
+    assert b.session.anchors[0].kind == "aruco"
+
+
+def test_existing_recording_is_not_overwritten_without_force(rec, tmp_path):
+    out = tmp_path / "x"
+    with open_source(str(rec)) as src:
+        record(src, out, max_frames=3, progress=lambda s: None)
+    before = (out / "frames.csv").read_text()
+    with open_source(str(rec)) as src:
+        with pytest.raises(FileExistsError, match="use --force to overwrite"):
+            record(src, out, progress=lambda s: None)
+    assert (out / "frames.csv").read_text() == before
+    with open_source(str(rec)) as src:
+        record(src, out, max_frames=5, force=True, progress=lambda s: None)
+    assert len(RecordingSource(out).times) == 5
+
+
+def test_seconds_limit_and_progress_line(rec, tmp_path):
+    lines = []
+    with open_source(str(rec)) as src:
+        s = record(src, tmp_path / "s", seconds=0.3, progress=lines.append)
+    times = RecordingSource(s.folder).times
+    assert times[-1] >= 0.3 and times[-2] < 0.3
+    assert "frames" in lines[-1] and "dropped" in lines[-1]
+
+
+def test_ctrl_c_finishes_the_file_cleanly(rec, tmp_path):
+    class Interrupting:
+        """Wraps a source and sends SIGINT to this process at frame 5, like Ctrl-C."""
+
+        def __init__(self, src):
+            self.src, self.camera, self.fps, self.info = src, src.camera, src.fps, src.info
+
+        def __iter__(self):
+            for f in self.src:
+                if f.index == 5:  # Ctrl-C while frame 5 is being captured: it is the last one written
+                    os.kill(os.getpid(), signal.SIGINT)
+                yield f
+
+    with open_source(str(rec)) as src:
+        lines = []
+        s = record(Interrupting(src), tmp_path / "c", progress=lines.append)
+    assert "stopped by Ctrl-C" in lines[-1]
+    with RecordingSource(s.folder) as r:
+        assert [f.index for f in r] == list(range(6))
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # handler restored
+
+
+def test_writer_checks_frames_and_anchors(tmp_path):
+    with pytest.raises(SessionError, match=r"anchors\[0\].length: missing"):
+        RecordingWriter(tmp_path / "a", CAM, 30, [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 1}])
+    with pytest.raises(SourceError, match="codec 'H264' not supported"):
+        RecordingWriter(tmp_path / "b", CAM, 30, fourcc="H264")
+    w = RecordingWriter(tmp_path / "c", CAM, 30)
+    with pytest.raises(SourceError, match="frame of 320x240 does not match the camera size 160x120"):
+        w.write(np.zeros((240, 320, 3), np.uint8), 0.0)
+    w.write(frame_image(0), 5.0)
+    w.close()
+    assert load_session(tmp_path / "c").video == "video.avi"
+
+
+def test_cli_record_messages(rec, tmp_path, capsys):
+    video = str(rec / "video.mkv")
+    assert main(["record", "--source", video, "--out", str(tmp_path / "v")]) == 2
+    err = capsys.readouterr().err
+    assert "no calibration; pass --calibration" in err and not (tmp_path / "v").exists()
+    assert main(["record", "--source", "v4l2:/dev/video99", "--out", str(tmp_path / "w")]) == 2
+    assert "no camera at /dev/video99" in capsys.readouterr().err
+    bad = tmp_path / "anchors.json"
+    bad.write_text("[{]")
+    CAM.save_yaml(tmp_path / "cam.yaml")
+    assert main(["record", "--source", video, "--calibration", str(tmp_path / "cam.yaml"), "--anchors", str(bad),
+                 "--out", str(tmp_path / "z")]) == 2
+    assert "anchors.json: invalid JSON at line 1" in capsys.readouterr().err
+    bad.write_text(json.dumps({"anchors": ANCHORS}))
+    assert main(["record", "--source", video, "--calibration", str(tmp_path / "cam.yaml"), "--anchors", str(bad),
+                 "--out", str(tmp_path / "z"), "--seconds", "0.2"]) == 0
+    assert len(load_session(tmp_path / "z").anchors) == 2
+    assert main(["record", "--source", video, "--calibration", str(tmp_path / "cam.yaml"),
+                 "--out", str(tmp_path / "z")]) == 2
+    assert "use --force" in capsys.readouterr().err

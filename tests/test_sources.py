@@ -1,0 +1,228 @@
+"""Sources: replay of recordings (timestamps, seek, loop, pacing), video files, and every failure message."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from tracking.camera import Camera
+from tracking.errors import CalibrationError, SessionError, SourceError
+from tracking.recorder import RecordingWriter
+from tracking.sources import (Frame, RecordingSource, SourceWarning, V4L2Source, VideoFileSource, open_source,
+                              read_frames_csv)
+
+W, H = 160, 120
+CAM = Camera([[150.0, 0, 79.5], [0, 150.0, 59.5], [0, 0, 1]], [0.01, 0, 0, 0, 0], W, H)
+# Irregular capture times (a real camera's), so replay must use frames.csv and not frame / fps.
+TIMES = np.cumsum([0.0] + [0.031, 0.035, 0.029, 0.040, 0.033, 0.034, 0.030, 0.036, 0.032, 0.033] * 2)
+
+
+def frame_image(i: int) -> np.ndarray:
+    """A frame that encodes its index in flat blocks (survives lossy codecs) plus some structure."""
+    img = np.zeros((H, W, 3), np.uint8)
+    img[:, :] = (8 * i + 20, 200 - 6 * i, 128)
+    cv2.putText(img, str(i), (20, 80), cv2.FONT_HERSHEY_SIMPLEX, 2.0, (255, 255, 255), 3)
+    return img
+
+
+def index_of(img: np.ndarray) -> int:
+    return int(round((float(np.median(img[5:30, 5:30, 0])) - 20) / 8))
+
+
+def make_recording(folder: Path, fourcc: str = "FFV1", n: int = len(TIMES)) -> Path:
+    with RecordingWriter(folder, CAM, 30.0, None, {"kind": "synthetic"}, fourcc=fourcc) as w:
+        for i in range(n):
+            w.write(frame_image(i), 100.0 + TIMES[i])  # absolute capture clock: stored relative to frame 0
+    return folder
+
+
+@pytest.fixture(scope="module")
+def rec(tmp_path_factory) -> Path:
+    return make_recording(tmp_path_factory.mktemp("rec") / "r")
+
+
+@pytest.fixture(scope="module")
+def rec_mjpg(tmp_path_factory) -> Path:
+    return make_recording(tmp_path_factory.mktemp("recm") / "r", "MJPG")
+
+
+def test_replay_yields_every_frame_once_with_recorded_timestamps(rec):
+    with RecordingSource(rec) as src:
+        assert src.frame_count == len(TIMES) and src.camera.to_dict() == CAM.to_dict()
+        frames = list(src)
+    assert all(isinstance(f, Frame) for f in frames)
+    assert [f.index for f in frames] == list(range(len(TIMES)))
+    np.testing.assert_allclose([f.t for f in frames], TIMES - TIMES[0], atol=1e-6)
+    for f in frames:
+        assert f.image.shape == (H, W, 3) and f.image.dtype == np.uint8
+        np.testing.assert_array_equal(f.image, frame_image(f.index))  # FFV1 is lossless
+    assert src.error is None
+
+
+def test_seek_by_frame_and_time(rec):
+    with RecordingSource(rec) as src:
+        assert src.seek(frame=7) == 7
+        f = next(iter(src))
+        assert f.index == 7 and index_of(f.image) == 7
+        # t between frames 11 and 12: the first frame at or after t
+        t = (TIMES[11] + TIMES[12]) / 2 - TIMES[0]
+        assert src.seek(t=t) == 12
+        got = [(f.index, index_of(f.image)) for f in src]
+        assert got == [(i, i) for i in range(12, len(TIMES))]
+        src.seek(t=TIMES[3] - TIMES[0])  # exact time hits that frame
+        assert next(iter(src)).index == 3
+        with pytest.raises(SourceError, match="cannot seek to frame 99"):
+            src.seek(frame=99)
+
+
+def test_loop_restarts_and_counts(rec):
+    n = len(TIMES)
+    with RecordingSource(rec, loop=True) as src:
+        it = iter(src)
+        frames = [next(it) for _ in range(2 * n + 3)]
+    assert [f.index for f in frames] == list(range(n)) * 2 + [0, 1, 2]
+    assert [index_of(f.image) for f in frames] == [f.index for f in frames]
+    assert src.loops == 2
+
+
+def test_realtime_pacing_follows_recorded_times(rec):
+    with RecordingSource(rec, realtime=True) as src:
+        start, late = None, []
+        for f in src:
+            now = time.monotonic()
+            if start is None:
+                start = now
+            late.append((now - start) - f.t)
+    late = np.array(late)
+    assert late.min() > -0.001  # never early
+    # within a few ms typically; the max allows for a loaded 2-core CI machine, and lateness must not
+    # accumulate (each frame is paced against the first one's clock, not the previous frame's)
+    assert np.median(late) < 0.004 and late.max() < 0.05, late
+
+
+def test_plain_video_needs_calibration_for_a_camera(rec_mjpg, tmp_path):
+    video = rec_mjpg / "video.avi"
+    with open_source(str(video)) as src:
+        assert isinstance(src, VideoFileSource) and not src.has_camera
+        with pytest.raises(SourceError, match="no calibration; pass --calibration"):
+            src.camera  # noqa: B018
+        frames = list(src)
+    assert [index_of(f.image) for f in frames] == list(range(len(TIMES)))
+    np.testing.assert_allclose([f.t for f in frames], np.arange(len(TIMES)) / 30.0)
+    CAM.scaled(320, 240).save_yaml(tmp_path / "cam.yaml")  # same lens, calibrated at twice the size
+    with open_source(f"file:{video}", calibration=tmp_path / "cam.yaml") as src:
+        np.testing.assert_allclose(src.camera.K, CAM.K, atol=1e-9)
+    Camera(CAM.K, CAM.dist, 160, 160).save_yaml(tmp_path / "square.yaml")
+    with pytest.raises(CalibrationError, match="another aspect ratio"):
+        VideoFileSource(video, tmp_path / "square.yaml")
+
+
+def test_truncated_video_replays_up_to_the_damage_and_reports_it(rec_mjpg, tmp_path):
+    bad = tmp_path / "trunc"
+    shutil.copytree(rec_mjpg, bad)
+    data = (bad / "video.avi").read_bytes()
+    (bad / "video.avi").write_bytes(data[: int(len(data) * 0.55)])
+    with RecordingSource(bad) as src:
+        with pytest.warns(SourceWarning, match="truncated or corrupt"):
+            frames = list(src)
+    assert 3 <= len(frames) < len(TIMES)
+    assert [index_of(f.image) for f in frames] == list(range(len(frames)))
+    assert "video.avi" in src.error and f"frame {len(frames)} of {len(TIMES)}" in src.error
+
+
+def test_corrupt_and_missing_video_name_the_file(rec_mjpg, tmp_path):
+    bad = tmp_path / "garbage"
+    shutil.copytree(rec_mjpg, bad)
+    (bad / "video.avi").write_bytes(np.random.default_rng(0).integers(0, 256, 20000, dtype=np.uint8).tobytes())
+    with pytest.raises(SourceError, match=r"garbage/video.avi: (OpenCV cannot open|the video opens but no frame)"):
+        RecordingSource(bad)
+    (bad / "video.avi").write_bytes(b"")
+    with pytest.raises(SourceError, match="video.avi: video file is empty"):
+        RecordingSource(bad)
+    (bad / "video.avi").unlink()
+    with pytest.raises(SourceError, match="video.avi: missing; .*session.json names video 'video.avi'"):
+        RecordingSource(bad)
+
+
+def test_invalid_session_and_frames_csv_messages(rec, tmp_path):
+    bad = tmp_path / "bad"
+    shutil.copytree(rec, bad)
+    good = json.loads((bad / "session.json").read_text())
+    (bad / "session.json").write_text('{"format": "arapp-recording/1",\n "fps": }')
+    with pytest.raises(SessionError, match="invalid JSON at line 2"):
+        open_source(str(bad))
+    for patch, msg in (({"fps": -1}, "fps: must be a positive number"),
+                       ({"camera": {**good["camera"], "K": [[1, 0], [0, 1]]}}, r"camera.K: must be 3x3"),
+                       ({"anchors": [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0}]},
+                        r"anchors\[0\].length: missing"),
+                       ({"camera": {**good["camera"], "width": 320, "height": 240}}, "camera is 320x240 but video.mkv has 160x120")):
+        (bad / "session.json").write_text(json.dumps({**good, **patch}))
+        with pytest.raises(SessionError, match=msg):
+            RecordingSource(bad)
+    (bad / "session.json").write_text(json.dumps(good))
+    (bad / "frames.csv").write_text("frame,t\n0,0.0\n1,0.03\n3,0.06\n")
+    with pytest.raises(SessionError, match=r"frames.csv:4: frame 3 out of order; expected 2"):
+        RecordingSource(bad)
+    (bad / "frames.csv").write_text("index,time\n0,0\n")
+    with pytest.raises(SessionError, match="header 'frame,t'"):
+        read_frames_csv(bad / "frames.csv")
+    with pytest.raises(SessionError, match="no session.json"):
+        open_source(str(tmp_path))
+
+
+def test_source_specs_and_missing_devices(tmp_path):
+    with pytest.raises(SourceError, match=r"no camera at /dev/video99 .*arapp sources"):
+        open_source("v4l2:/dev/video99")
+    with pytest.raises(SourceError, match="no camera at /dev/video99"):
+        open_source("v4l2:99")
+    with pytest.raises(SourceError, match="v4l2 needs a device"):
+        open_source("v4l2:")
+    with pytest.raises(SourceError, match="no camera at /dev/video98"):
+        V4L2Source(98)
+    with pytest.raises(SourceError, match=r"unknown source kind 'rtsp'"):
+        open_source("rtsp://camera.local/stream")
+    with pytest.raises(SourceError, match="nothing_here: no such recording folder or video file"):
+        open_source(str(tmp_path / "nothing_here"))
+    with pytest.raises(SourceError, match="empty source"):
+        open_source("  ")
+    not_video = tmp_path / "notes.txt"
+    not_video.write_text("hello")
+    with pytest.raises(SourceError, match="notes.txt: (OpenCV cannot open|the video opens but no frame)"):
+        open_source(f"file:{not_video}")
+
+
+def test_depthai_without_a_device_says_so():
+    pytest.importorskip("depthai")  # installed in this project; the skip only guards foreign setups
+    from tracking.sources import list_depthai
+
+    if list_depthai():
+        pytest.skip("a DepthAI device is attached")
+    with pytest.raises(SourceError, match="no DepthAI \\(OAK\\) device found"):
+        open_source("depthai")
+    with pytest.raises(SourceError, match="no DepthAI \\(OAK\\) device found"):
+        open_source("depthai:1844301011B546F500")
+
+
+def test_arapp_sources_lists_devices_or_says_none(monkeypatch, capsys):
+    import tracking.sources as sources
+    from arapp.cli import main
+
+    monkeypatch.setattr(sources, "list_v4l2", lambda: [])
+    monkeypatch.setattr(sources, "list_depthai", lambda: [])
+    assert main(["sources"]) == 0
+    out = capsys.readouterr().out
+    assert "V4L2 cameras:\n  none found" in out and "No camera is attached" in out
+    monkeypatch.setattr(sources, "list_v4l2",
+                        lambda: [{"spec": "v4l2:/dev/video0", "device": "/dev/video0", "name": "HD Webcam"}])
+    monkeypatch.setattr(sources, "list_depthai",
+                        lambda: [{"spec": "depthai:14442C10", "id": "14442C10", "name": "1.1", "state": "UNBOOTED"}])
+    assert main(["sources"]) == 0
+    out = capsys.readouterr().out
+    assert "v4l2:/dev/video0" in out and "HD Webcam" in out and "depthai:14442C10" in out
+    assert "No camera is attached" not in out

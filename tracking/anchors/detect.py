@@ -1,0 +1,173 @@
+"""ArUco and ChArUco detection for a session's anchors, with subpixel corners and optional regions of interest.
+
+Corners are distorted pixel coordinates (pixel centres at integers).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from tracking.anchors.model import AnchorModel
+from tracking.anchors.edges import refine_squares
+from tracking.camera import Camera
+
+_SUBPIX = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
+
+
+def detector_parameters() -> cv2.aruco.DetectorParameters:
+    """The detector settings shared by arapp and the plain baseline: subpixel corner refinement."""
+    p = cv2.aruco.DetectorParameters()
+    p.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
+    return p
+
+
+@dataclass
+class Observation:
+    """Image points of one anchor in one frame.
+
+    `obj`: (N,3) anchor-frame points; `img`: (N,2) distorted pixels; `groups`: (N,) int label per point
+    (marker id, or -1-k for chessboard/QR points) so whole markers can be rejected together;
+    `markers`: number of markers / codes behind these points.
+    """
+
+    anchor: int
+    obj: np.ndarray
+    img: np.ndarray
+    groups: np.ndarray
+    markers: int
+    square: bool = False  # the 4 corners of one square marker (IPPE_SQUARE applies)
+
+
+class ArucoDetection:
+    """Finds the ArUco markers (and ChArUco corners) of the anchors; one OpenCV detector per dictionary."""
+
+    def __init__(self, models: list[AnchorModel], camera: Camera):
+        self.camera = camera
+        self.models = [m for m in models if m.kind != "qr"]
+        self.by_dict: dict[int, dict[int, AnchorModel]] = {}
+        for m in self.models:
+            ids = self.by_dict.setdefault(m.spec.dictionary_id, {})
+            for mid in m.markers:
+                ids[mid] = m
+        # Corners come from edge fitting (edges.py), more exact than the detector's own subpixel step.
+        params = detector_parameters()
+        params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
+        self.bits = {d: cv2.aruco.getPredefinedDictionary(d).markerSize + 2 for d in self.by_dict}
+        self.detectors = {
+            d: cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(d), params) for d in self.by_dict
+        }
+        self.charuco = {}
+        for m in self.models:
+            if m.kind == "charuco":
+                cp = cv2.aruco.CharucoParameters()
+                cp.cameraMatrix = camera.K
+                cp.distCoeffs = camera.dist.reshape(1, -1)
+                cp.minMarkers = 1
+                self.charuco[m.index] = cv2.aruco.CharucoDetector(m.board, cp, params)
+        self.last_foreign = 0  # markers of the right dictionaries but ids of no anchor, last frame
+
+    def detect(self, gray: np.ndarray, roi: tuple[int, int, int, int] | None = None) -> list[Observation]:
+        """Observations of the ArUco-based anchors in `gray`, optionally only inside roi=(x0, y0, x1, y1)."""
+        x0 = y0 = 0
+        full = gray
+        if roi is not None:
+            x0, y0, x1, y1 = roi
+            gray = gray[y0:y1, x0:x1]
+        per_anchor: dict[int, list] = {}
+        foreign = 0
+        for d, det in self.detectors.items():
+            corners, ids, _ = det.detectMarkers(gray)
+            if ids is None:
+                continue
+            for c, mid in zip(corners, ids.ravel()):
+                m = self.by_dict[d].get(int(mid))
+                if m is None:
+                    foreign += 1
+                    continue
+                per_anchor.setdefault(m.index, []).append((int(mid), c.reshape(4, 2).astype(np.float64) + [x0, y0], d))
+        self.last_foreign = foreign
+        out = []
+        for m in self.models:
+            found = per_anchor.get(m.index)
+            if not found:
+                continue
+            # A marker id seen twice is ambiguous (a reflection, a second print): drop both.
+            seen = [mid for mid, _, _ in found]
+            found = [(mid, c, d) for mid, c, d in found if seen.count(mid) == 1]
+            if not found:
+                continue
+            quads = np.array([c for _, c, _ in found])
+            side = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).min(axis=1)
+            cell = side / np.array([self.bits[d] for _, _, d in found])
+            refined, ok = refine_squares(full, quads, cell, self.camera)
+            if not ok.all():
+                # corners the edges could not refine (cut by the image border, blur): gradient refinement
+                rest = quads[~ok].reshape(-1, 1, 2).astype(np.float32)
+                rest = cv2.cornerSubPix(full, rest, (3, 3), (-1, -1), _SUBPIX)
+                refined[~ok] = rest.reshape(-1, 4, 2)
+            found = [(mid, q) for (mid, _, _), q in zip(found, refined)]
+            if m.kind == "charuco":
+                obs = self._charuco(m, full, found)
+                if obs is not None:
+                    out.append(obs)
+                    continue
+            obj = np.concatenate([m.markers[mid] for mid, _ in found])
+            img = np.concatenate([c for _, c in found])
+            groups = np.repeat([mid for mid, _ in found], 4)
+            out.append(Observation(m.index, obj, img, groups, len(found), square=(m.kind == "aruco")))
+        return out
+
+    def track(self, gray: np.ndarray, keys: set[tuple[int, int]], camera_from_world: np.ndarray,
+              min_fraction: float = 0.6) -> list[Observation] | None:
+        """Re-find known markers (anchor, id) where a predicted pose puts them, without detecting.
+
+        Each marker's border is projected with `camera_from_world` and refined on its edges (edges.py);
+        edge fitting finds the true border when the prediction is within about half a marker cell.
+        Returns None (detect instead) when fewer than `min_fraction` of the markers are re-found, or when
+        a ChArUco board is among them (its chessboard corners need the detector).
+        """
+        from tracking.anchors.pose import project
+        keys = sorted(keys)
+        if not keys:
+            return None
+        by_index = {m.index: m for m in self.models}
+        if any(by_index[a].kind == "charuco" for a, _ in keys if a in by_index):
+            return None
+        keys = [(a, mid) for a, mid in keys if a in by_index]
+        world = np.concatenate([by_index[a].to_world(by_index[a].markers[mid]) for a, mid in keys])
+        px, z = project(self.camera, camera_from_world, world)
+        if np.any(z <= 0.01):
+            return None
+        quads = px.reshape(-1, 4, 2)
+        side = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).min(axis=1)
+        cell = side / np.array([self.bits[by_index[a].spec.dictionary_id] for a, _ in keys])
+        refined, ok = refine_squares(gray, quads, cell, self.camera)
+        if ok.sum() < max(1, min_fraction * len(keys)):
+            return None
+        per_anchor: dict[int, list] = {}
+        for (a, mid), q, good in zip(keys, refined, ok):
+            if good:
+                per_anchor.setdefault(a, []).append((mid, q))
+        out = []
+        for m in self.models:
+            found = per_anchor.get(m.index)
+            if found:
+                obj = np.concatenate([m.markers[mid] for mid, _ in found])
+                img = np.concatenate([q for _, q in found])
+                out.append(Observation(m.index, obj, img, np.repeat([mid for mid, _ in found], 4), len(found),
+                                       square=(m.kind == "aruco")))
+        return out
+
+    def _charuco(self, m: AnchorModel, gray, found) -> Observation | None:
+        """Chessboard corners of a ChArUco board (more precise than marker corners); None under 4 corners."""
+        mc = tuple(c.reshape(1, 4, 2).astype(np.float32) for _, c in found)
+        mi = np.array([[mid] for mid, _ in found], np.int32)
+        cc, ci, _, _ = self.charuco[m.index].detectBoard(gray, markerCorners=mc, markerIds=mi)
+        if ci is None or len(ci) < 4:
+            return None
+        ci = ci.ravel()
+        return Observation(m.index, m.chess[ci], cc.reshape(-1, 2).astype(np.float64),
+                           -1 - np.zeros(len(ci), int), len(found))

@@ -1,0 +1,150 @@
+"""Subpixel corners of squares (marker borders, QR finder rings) by fitting lines to their edges.
+
+Gradient corner refiners (cornerSubPix) are biased toward the inside of an
+L-shaped corner as soon as the image is blurred (a few tenths of a pixel,
+which on a 50-pixel marker is a percent of distance). Edges are not: the
+gradient peak across a straight edge under a symmetric blur lies on the edge.
+So each side is sampled away from its ends, the edge is located along the
+normal (gradient peak, parabolic interpolation), the points are undistorted,
+a line is fitted, and adjacent lines intersect at the corners.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from tracking.camera import Camera
+
+
+def _distort(camera: Camera, und: np.ndarray) -> np.ndarray:
+    """Distorted pixels of undistorted pixels (same K)."""
+    if not camera.has_distortion:
+        return und
+    n = (und - [camera.cx, camera.cy]) / [camera.fx, camera.fy]
+    return camera.project(np.c_[n, np.ones(len(n))])
+
+
+def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, camera: Camera | None = None,
+                   min_contrast: float = 8.0) -> tuple[np.ndarray, np.ndarray]:
+    """Refine approximate square corners (M,4,2) (distorted pixels, consecutive corners along the sides).
+
+    cell_px (M,): how far (pixels) each edge is from the next parallel edge inside/outside the square;
+    the search reaches 0.45 of it. Returns (refined (M,4,2), ok (M,) bool); quads that cannot be refined
+    (a side off the image or without contrast) are returned unchanged with ok False.
+    """
+    quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
+    cell_px = np.broadcast_to(np.asarray(cell_px, dtype=np.float64), (len(quads),))
+    out = quads.copy()
+    ok = np.zeros(len(quads), bool)
+    if len(quads) == 0:
+        return out, ok
+    h, w = gray.shape
+    # work on float32 samples of just the region the quads cover (a 720p conversion per call is not free)
+    reach = float(np.clip(0.45 * cell_px, 1.5, 5.0).max()) + 3.0
+    x0 = int(max(np.floor(quads[..., 0].min() - reach), 0))
+    y0 = int(max(np.floor(quads[..., 1].min() - reach), 0))
+    x1 = int(min(np.ceil(quads[..., 0].max() + reach) + 1, w))
+    y1 = int(min(np.ceil(quads[..., 1].max() + reach) + 1, h))
+    if x1 <= x0 or y1 <= y0:
+        return out, ok
+    img = gray[y0:y1, x0:x1].astype(np.float32)
+    # Sample geometry for every side of every quad at once.
+    a = quads
+    b = np.roll(quads, -1, axis=1)
+    length = np.linalg.norm(b - a, axis=2)  # (M,4)
+    ns = 16
+    t = np.linspace(0.2, 0.8, ns)
+    r = np.clip(0.45 * cell_px, 1.5, 5.0)  # (M,)
+    steps = np.linspace(-1.0, 1.0, 17)  # fractions of r
+    d = (b - a) / np.maximum(length[..., None], 1e-9)
+    nrm = np.stack([-d[..., 1], d[..., 0]], axis=-1)  # (M,4,2)
+    base = a[:, :, None, :] + (b - a)[:, :, None, :] * t[None, None, :, None]  # (M,4,ns,2)
+    offs = steps[None, :] * r[:, None]  # (M,17)
+    shift = np.zeros(base.shape[:-1])
+    valid = np.ones(base.shape[:-1], bool)
+    for _ in range(2):  # the second pass re-centres the window on the first estimate
+        centre = base + nrm[:, :, None, :] * shift[..., None]
+        pts = centre[:, :, :, None, :] + nrm[:, :, None, None, :] * offs[:, None, None, :, None]  # (M,4,ns,17,2)
+        flat = pts.reshape(-1, 2).astype(np.float32)
+        vals = cv2.remap(img, flat[:, 0:1] - np.float32(x0), flat[:, 1:2] - np.float32(y0), cv2.INTER_LINEAR,
+                         borderMode=cv2.BORDER_REPLICATE).reshape(pts.shape[:-1]).astype(np.float64)
+        inside = (flat[:, 0] >= 0) & (flat[:, 0] <= w - 1) & (flat[:, 1] >= 0) & (flat[:, 1] <= h - 1)
+        inside = inside.reshape(pts.shape[:-1]).all(axis=-1)  # (M,4,ns)
+        # Edge position = centroid of |dI/ds|; by parts it is a ratio of areas under the profile, which
+        # the trapezoid rule gets right on interpolated samples (a gradient peak would snap to pixels).
+        lo, hi = vals[..., 0], vals[..., -1]
+        contrast = hi - lo
+        rr = r[:, None, None]
+        area = np.trapezoid(vals, dx=(steps[1] - steps[0]), axis=-1) * rr  # integral over s in [-r, r]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sc = (rr * (hi + lo) - area) / contrast
+        mono = np.abs(np.diff(vals, axis=-1)) <= np.abs(contrast)[..., None] * 0.6 + 2.0
+        valid = inside & (np.abs(contrast) > min_contrast) & np.isfinite(sc) & (np.abs(sc) < rr) & mono.all(-1)
+        shift = shift + np.where(valid, sc, 0.0)
+    edge = base + nrm[:, :, None, :] * shift[..., None]  # (M,4,ns,2)
+    # Lines for all sides at once: undistort every edge point in one call, then a weighted total-least-
+    # squares fit per side (weights 0/1 = valid), one pass of outlier rejection.
+    M = len(quads)
+    pts = edge.reshape(-1, 2)
+    if camera is not None and camera.has_distortion:
+        pts = camera.undistort_points(pts)
+    pts = pts.reshape(M, 4, ns, 2)
+    wgt = valid.astype(np.float64)
+    for _ in range(2):
+        cnt = wgt.sum(axis=-1)  # (M,4)
+        c = (pts * wgt[..., None]).sum(axis=2) / np.maximum(cnt, 1)[..., None]
+        dp = (pts - c[:, :, None, :]) * wgt[..., None]
+        sxx = (dp[..., 0] ** 2).sum(-1)
+        syy = (dp[..., 1] ** 2).sum(-1)
+        sxy = (dp[..., 0] * dp[..., 1]).sum(-1)
+        # normal = eigenvector of the scatter matrix with the smaller eigenvalue
+        theta = 0.5 * np.arctan2(2 * sxy, sxx - syy)  # direction of the line
+        nvec = np.stack([-np.sin(theta), np.cos(theta)], axis=-1)  # (M,4,2)
+        res = np.abs(((pts - c[:, :, None, :]) * nvec[:, :, None, :]).sum(-1))
+        masked = np.sort(np.where(wgt > 0, res, np.inf), axis=-1)
+        mid = np.clip((cnt.astype(int) - 1) // 2, 0, ns - 1)
+        rmed = np.where(cnt > 0, np.take_along_axis(masked, mid[..., None], -1)[..., 0], 0.0)
+        wgt = wgt * (res <= np.maximum(3.0 * 1.4826 * rmed, 0.1)[..., None])
+    cnt = wgt.sum(axis=-1)
+    side_ok = cnt >= 5
+    # corner k = intersection of side k-1 and side k: n1.x = n1.c1, n2.x = n2.c2
+    n1, n2 = np.roll(nvec, 1, axis=1), nvec
+    c1, c2 = np.roll(c, 1, axis=1), c
+    det = n1[..., 0] * n2[..., 1] - n1[..., 1] * n2[..., 0]
+    b1 = (n1 * c1).sum(-1)
+    b2 = (n2 * c2).sum(-1)
+    safe = np.where(np.abs(det) > 1e-6, det, 1.0)
+    corners = np.stack([(b1 * n2[..., 1] - b2 * n1[..., 1]) / safe, (n1[..., 0] * b2 - n2[..., 0] * b1) / safe], -1)
+    good = side_ok.all(axis=1) & (np.abs(det) > 1e-6).all(axis=1)
+    if camera is not None and camera.has_distortion and good.any():
+        corners[good] = _distort(camera, corners[good].reshape(-1, 2)).reshape(-1, 4, 2)
+    # a refinement that moves a corner far is a failure (wrong edge), not an improvement
+    moved = np.linalg.norm(corners - quads, axis=2).max(axis=1)
+    good &= moved <= np.maximum(0.5 * cell_px, 1.5)
+    out[good] = corners[good]
+    ok[good] = True
+    return out, ok
+
+
+def _fit_line(p: np.ndarray):
+    """Total-least-squares line (point, unit normal) through points, one pass of outlier rejection."""
+    for _ in range(2):
+        c = p.mean(axis=0)
+        u, s, vt = np.linalg.svd(p - c, full_matrices=False)
+        n = vt[1]
+        res = (p - c) @ n
+        mad = np.median(np.abs(res - np.median(res)))
+        keep = np.abs(res) <= max(3.0 * 1.4826 * mad, 0.1)
+        if keep.all() or keep.sum() < 5:
+            break
+        p = p[keep]
+    return c, n
+
+
+def _intersect(l1, l2):
+    (c1, n1), (c2, n2) = l1, l2
+    A = np.array([n1, n2])
+    if abs(np.linalg.det(A)) < 1e-6:
+        return None
+    return np.linalg.solve(A, [n1 @ c1, n2 @ c2])

@@ -1,0 +1,136 @@
+"""Temporal filtering of camera poses on SE(3): an adaptive constant-velocity (alpha-beta) filter.
+
+The state is the camera's position p (world, metres), orientation R
+(world_from_camera rotation) and their velocities v (m/s), w (rad/s, world
+frame). Each frame the state is predicted with constant velocity and pulled
+toward the measurement by a gain alpha that adapts like the One-Euro filter:
+the cutoff frequency grows with the camera's speed (rad/s, translation
+counted as the angle it subtends at the scene distance) and with innovation
+beyond three times its usual size (a sudden start or stop), so a still camera
+is smoothed hard while a moving one is followed closely. Velocity is
+corrected with the Benedict-Bordner gain beta = alpha^2 / (2 - alpha); with
+the velocity in the prediction, constant motion is followed without lag.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+
+def _exp(w: np.ndarray) -> np.ndarray:
+    return cv2.Rodrigues(np.asarray(w, dtype=np.float64).reshape(3, 1))[0]
+
+
+def _log(R: np.ndarray) -> np.ndarray:
+    return cv2.Rodrigues(np.ascontiguousarray(R, dtype=np.float64))[0].ravel()
+
+
+class PoseFilter:
+    """Adaptive constant-velocity filter of `world_from_camera` poses.
+
+    min_cutoff: cutoff frequency (Hz) when the motion is fully predicted; lower = smoother.
+    beta: how fast the cutoff rises with the unexplained speed (Hz per rad/s); higher = less lag.
+    max_gap: seconds without a measurement after which the filter restarts from the next one.
+    jump: unexplained motion (radians, translation counted as metres / scene distance) that restarts the filter.
+    max_velocity_alpha: cap on the gain used to derive the velocity correction (robustness to noisy frames).
+    """
+
+    def __init__(self, min_cutoff: float = 1.0, beta: float = 10.0, max_gap: float = 0.5, jump: float = 0.5,
+                 max_velocity_alpha: float = 0.4):
+        if min_cutoff <= 0 or beta < 0 or max_gap <= 0 or jump <= 0:
+            raise ValueError("filter parameters: min_cutoff, max_gap and jump must be positive and beta >= 0")
+        self.min_cutoff = float(min_cutoff)
+        self.beta = float(beta)
+        self.max_gap = float(max_gap)
+        self.jump = float(jump)
+        self.max_velocity_alpha = float(max_velocity_alpha)
+        self.reset()
+
+    def reset(self) -> None:
+        self.t = None
+        self.p = self.R = None
+        self.v = np.zeros(3)
+        self.w = np.zeros(3)
+        self.n = 0
+        self.noise2 = None  # running mean of the squared innovation (rad^2)
+
+    @property
+    def initialised(self) -> bool:
+        return self.t is not None
+
+    def predict(self, t: float) -> np.ndarray | None:
+        """Predicted world_from_camera at time t (None before the first measurement or after a long gap)."""
+        if self.t is None or t - self.t > self.max_gap:
+            return None
+        dt = max(t - self.t, 0.0)
+        T = np.eye(4)
+        T[:3, :3] = _exp(self.w * dt) @ self.R
+        T[:3, 3] = self.p + self.v * dt
+        return T
+
+    def update(self, world_from_camera: np.ndarray, t: float, distance: float = 1.0,
+               sigma: float | None = None) -> np.ndarray:
+        """Filtered pose after the measurement `world_from_camera` at time t (seconds).
+
+        `distance` (metres, the scene depth) converts translation to the angle it subtends. `sigma`
+        (radians, optional): the measurement's own noise; an innovation many sigmas large is motion the
+        filter has not caught up with, and the gain rises toward 1 - (3 sigma / innovation)^2 so that a
+        precise measurement is never lagged behind.
+        """
+        Rm = world_from_camera[:3, :3]
+        pm = world_from_camera[:3, 3]
+        pred = self.predict(t)
+        dt = 0.0 if self.t is None else t - self.t
+        if pred is None or dt <= 0:
+            return self._restart(world_from_camera, t)
+        e_p = pm - pred[:3, 3]
+        e_r = _log(Rm @ pred[:3, :3].T)
+        d = max(float(distance), 1e-3)
+        m = float(np.linalg.norm(e_r) + np.linalg.norm(e_p) / d)
+        if m > self.jump:
+            return self._restart(world_from_camera, t)
+        if self.noise2 is None:
+            self.noise2 = m * m
+        surprise = max(0.0, m - 3.0 * math.sqrt(self.noise2))
+        self.noise2 = 0.9 * self.noise2 + 0.1 * min(m * m, 9.0 * self.noise2 + 1e-12)
+        speed = float(np.linalg.norm(self.w) + np.linalg.norm(self.v) / d)
+        fc = self.min_cutoff + self.beta * (speed + surprise / dt)
+        tau = 1.0 / (2.0 * math.pi * fc)
+        a = 1.0 / (1.0 + tau / dt)
+        if sigma is not None and m > 3.0 * sigma:
+            a = max(a, 1.0 - (3.0 * sigma / m) ** 2)
+        # velocity gain from a capped alpha: one noisy frame must not fling the prediction (and with it
+        # the choice between a marker's two IPPE solutions) far off
+        av = min(a, self.max_velocity_alpha)
+        b = av * av / (2.0 - av)
+        self.p = pred[:3, 3] + a * e_p
+        self.R = _exp(a * e_r) @ pred[:3, :3]
+        self.n += 1
+        if self.n == 1:
+            # second measurement: start the velocity from the finite difference instead of from rest
+            self.v, self.w = e_p / dt, e_r / dt
+            self.p, self.R = pm.copy(), Rm.copy()
+        else:
+            self.v = self.v + (b / dt) * e_p
+            self.w = self.w + (b / dt) * e_r
+        self.t = t
+        return self.pose()
+
+    def pose(self) -> np.ndarray:
+        T = np.eye(4)
+        T[:3, :3] = self.R
+        T[:3, 3] = self.p
+        return T
+
+    def _restart(self, world_from_camera: np.ndarray, t: float) -> np.ndarray:
+        self.t = float(t)
+        self.n = 0
+        self.noise2 = None
+        self.R = world_from_camera[:3, :3].copy()
+        self.p = world_from_camera[:3, 3].copy()
+        self.v = np.zeros(3)
+        self.w = np.zeros(3)
+        return self.pose()

@@ -1,0 +1,282 @@
+"""AnchorTracker: the camera pose from a session's anchors, frame by frame; and the plain OpenCV baseline."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from tracking.anchors.detect import ArucoDetection, Observation, detector_parameters
+from tracking.anchors.filter import PoseFilter
+from tracking.anchors.model import AnchorModel, build_models, square_corners
+from tracking.anchors.pose import planar_solutions, project, residuals, solve_pose
+from tracking.anchors.qr import QRTracking
+from tracking.camera import Camera
+from tracking.poses import from_rvec_tvec, invert, rotation_angle, transform_points
+from tracking.session import AnchorSpec
+
+
+@dataclass
+class AnchorResult:
+    """What the anchors say about one frame.
+
+    world_from_camera: filtered pose (4x4) or None when no anchor was seen.
+    raw_world_from_camera: this frame's own solution (no filtering), or None.
+    markers: ArUco markers / QR codes detected and used; inliers: corner points in the final PnP.
+    reprojection_error: RMS pixels of the final solution (nan if none).
+    object_points (N,3) world metres / image_points (N,2) distorted pixels: the inlier correspondences.
+    anchors_seen: indices into the anchors list; ms: processing time of this frame.
+    """
+
+    world_from_camera: np.ndarray | None = None
+    raw_world_from_camera: np.ndarray | None = None
+    markers: int = 0
+    inliers: int = 0
+    reprojection_error: float = float("nan")
+    object_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    image_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    anchors_seen: list[int] = field(default_factory=list)
+    ms: float = 0.0
+
+
+def to_gray(image: np.ndarray) -> np.ndarray:
+    """uint8 gray from a gray or BGR(A) image."""
+    if image.ndim == 2:
+        return image
+    if image.shape[2] == 4:
+        return cv2.cvtColor(image, cv2.COLOR_BGRA2GRAY)
+    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+
+
+class AnchorTracker:
+    """Tracks the camera against a session's anchors (ArUco markers, GridBoards, ChArUco boards, QR codes).
+
+    anchors: the session's anchors (the first defines the world); camera: intrinsics and distortion of the
+    images passed to `process`. filter: smooth the output pose (PoseFilter; `filter_params` are its
+    min_cutoff, beta, max_gap, jump). roi: detect markers only around where the last pose predicts them,
+    with a full-frame search every `full_every` frames. track_markers: between those searches, re-find the
+    last frame's markers on their edges where the prediction puts them, without running the detector
+    (it falls back to detection when they are not found). outlier_px: reprojection error beyond which a
+    corner is an outlier. branch_decay / branch_switch: how evidence for the other IPPE solution of a lone
+    marker accumulates before the tracker switches to it (see _other_branch_wins).
+    """
+
+    def __init__(self, anchors: list[AnchorSpec], camera: Camera, filter: bool = True, *, roi: bool = True,
+                 full_every: int = 10, track_markers: bool = True, outlier_px: float = 3.0, branch_decay: float = 0.8,
+                 branch_switch: float = 6.0, **filter_params):
+        if not anchors:
+            raise ValueError("AnchorTracker needs at least one anchor (the session's anchors list is empty)")
+        self.anchors = list(anchors)
+        self.camera = camera
+        self.models: list[AnchorModel] = build_models(self.anchors)
+        self.world_from_anchor = [m.world_from_anchor for m in self.models]
+        self.aruco = ArucoDetection(self.models, camera)
+        self.qr = QRTracking(self.models, camera)
+        self.filter_enabled = bool(filter)
+        self.filter = PoseFilter(**filter_params)
+        self.roi = roi
+        self.full_every = max(int(full_every), 1)
+        self.track_markers = bool(track_markers)
+        self.outlier_px = float(outlier_px)
+        self.branch_decay = float(branch_decay)
+        self.branch_switch = float(branch_switch)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget all temporal state (filter, tracked QR corners, frame counter)."""
+        self.filter.reset()
+        self.qr.reset()
+        self.frame = 0
+        self.last_raw: np.ndarray | None = None
+        self.branch_evidence = 0.0
+        self._alternative = None
+        self.tracked_keys: set[tuple[int, int]] = set()
+
+    def _other_branch_wins(self, obs: list[Observation], sol) -> bool:
+        """Accumulate evidence between the two IPPE branches when a single planar anchor carries the pose.
+
+        Per frame the evidence is (cost of the other branch - cost of the kept one) / pixel_sigma^2, decayed
+        by `branch_decay`; True when it falls below -`branch_switch` (the other branch keeps fitting better).
+        """
+        if len(obs) != 1:
+            self.branch_evidence = 0.0
+            return False
+        ob = obs[0]
+        afw = invert(self.world_from_anchor[ob.anchor])
+        sols = [cfa @ afw for cfa in planar_solutions(ob, self.camera)]
+        if len(sols) < 2:
+            return False
+        ang = [rotation_angle(s[:3, :3] @ sol.camera_from_world[:3, :3].T) for s in sols]
+        kept, other = (0, 1) if ang[0] <= ang[1] else (1, 0)
+        if rotation_angle(sols[0][:3, :3] @ sols[1][:3, :3].T) < np.radians(2.0):
+            self.branch_evidence = 0.0
+            return False
+        world = transform_points(self.world_from_anchor[ob.anchor], ob.obj)
+        c = [float(np.sum(residuals(self.camera, s, world, ob.img) ** 2)) for s in sols]
+        self.branch_evidence = self.branch_decay * self.branch_evidence + (c[other] - c[kept]) / 0.25
+        if self.branch_evidence < -self.branch_switch:
+            self.branch_evidence = 0.0
+            self._alternative = sols[other]
+            return True
+        return False
+
+    # ------------------------------------------------------------------------------------------------
+    def process(self, image: np.ndarray, t: float) -> AnchorResult:
+        """Detect the anchors in `image` (BGR or gray uint8, distorted as `camera` says) taken at time t (s)."""
+        t0 = time.perf_counter()
+        gray = to_gray(image)
+        if gray.shape != (self.camera.height, self.camera.width):
+            raise ValueError(f"image is {gray.shape[1]}x{gray.shape[0]} but the camera is calibrated for "
+                             f"{self.camera.width}x{self.camera.height}; use Camera.scaled() for resized images")
+        pred = self.filter.predict(t)
+        pred_cfw = None if pred is None else invert(pred)
+        obs = self._detect_aruco(gray, pred_cfw)
+        if self.qr.models:
+            obs += self.qr.process(gray, pred_cfw, self._expected_qr(pred_cfw))
+        sol = solve_pose(obs, self.world_from_anchor, self.camera, pred_cfw, outlier_px=self.outlier_px)
+        if sol is not None and pred_cfw is not None and self._other_branch_wins(obs, sol):
+            # the image has favoured the other IPPE branch for a while: the branch kept so far was the wrong
+            # guess (e.g. the first frame's). Switch, and restart the filter so it does not smooth the jump.
+            alt = self._alternative
+            sol = solve_pose(obs, self.world_from_anchor, self.camera, alt, outlier_px=self.outlier_px)
+            self.filter.reset()
+        self.frame += 1
+        res = AnchorResult()
+        if sol is not None:
+            raw = sol.world_from_camera
+            depth = float(np.median((sol.world @ sol.camera_from_world[:3, :3].T + sol.camera_from_world[:3, 3])[:, 2]))
+            # the measurement's noise in radians: pixel error over the points' extent, fewer with more points
+            extent = float(np.linalg.norm(np.ptp(sol.img, axis=0)))
+            sigma = 2.0 * max(sol.rms, 0.1) / max(extent, 1.0) / np.sqrt(max(len(sol.img) / 4.0, 1.0))
+            filt = self.filter.update(raw, t, depth, sigma)
+            res.raw_world_from_camera = raw
+            res.world_from_camera = filt if self.filter_enabled else raw
+            res.markers = sol.markers
+            res.inliers = int(len(sol.world))
+            res.reprojection_error = sol.rms
+            res.object_points = sol.world
+            res.image_points = sol.img
+            res.anchors_seen = sol.anchors
+            self.last_raw = raw
+            self.tracked_keys = {(ob.anchor, int(g)) for ob in obs if ob.anchor in sol.anchors
+                                 and self.models[ob.anchor].kind in ("aruco", "aruco_board") for g in np.unique(ob.groups)}
+        else:
+            self.tracked_keys = set()
+        res.ms = (time.perf_counter() - t0) * 1000.0
+        return res
+
+    def _detect_aruco(self, gray: np.ndarray, pred_cfw: np.ndarray | None) -> list[Observation]:
+        if not self.aruco.models:
+            return []
+        if self.track_markers and pred_cfw is not None and self.frame % self.full_every and self.tracked_keys:
+            # between detections: the markers of the last frame, re-found on their edges where the
+            # predicted pose puts them (no detector pass at all)
+            obs = self.aruco.track(gray, self.tracked_keys, pred_cfw)
+            if obs:
+                return obs
+        roi = None
+        if self.roi and pred_cfw is not None and self.frame % self.full_every:
+            roi = self._aruco_roi(pred_cfw, gray.shape)
+        if roi is not None:
+            obs = self.aruco.detect(gray, roi)
+            if obs:
+                return obs
+        return self.aruco.detect(gray)
+
+    def _aruco_roi(self, cfw: np.ndarray, shape) -> tuple[int, int, int, int] | None:
+        """Box around the predicted image of every ArUco anchor in front of the camera; None = whole frame."""
+        pts = []
+        for m in self.aruco.models:
+            w = m.to_world(m.outline())
+            px, z = project(self.camera, cfw, w)
+            if np.any(z <= 0.01):
+                return None
+            pts.append(px)
+        pts = np.concatenate(pts)
+        h, w = shape
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        # slack for motion the prediction missed and for the marker border the detector needs to see
+        pad = 0.2 * (hi - lo) + 24
+        x0, y0 = np.maximum(np.floor(lo - pad), 0).astype(int)
+        x1, y1 = np.minimum(np.ceil(hi + pad), [w, h]).astype(int)
+        if x1 - x0 < 32 or y1 - y0 < 32 or (x1 - x0) * (y1 - y0) > 0.7 * w * h:
+            return None
+        return int(x0), int(y0), int(x1), int(y1)
+
+    def _expected_qr(self, cfw: np.ndarray | None) -> set[int] | None:
+        """QR anchors the predicted pose puts (partly) inside the image; None when there is no prediction."""
+        if cfw is None:
+            return None
+        out = set()
+        for m in self.qr.models:
+            px, z = project(self.camera, cfw, m.to_world(square_corners(m.spec.length)))
+            if np.all(z > 0) and np.any((px[:, 0] >= 0) & (px[:, 0] < self.camera.width)
+                                        & (px[:, 1] >= 0) & (px[:, 1] < self.camera.height)):
+                out.add(m.index)
+        return out
+
+    def diagnose(self, image: np.ndarray) -> list[str]:
+        """Plain-language reasons why the anchors are not (or badly) found in this image; [] when all is well."""
+        from tracking.anchors.diagnose import diagnose
+        return diagnose(self.anchors, self.camera, image)
+
+
+# ----------------------------------------------------------------------------------------------------
+class _Plain:
+    """Cached detectors for plain_opencv_pose."""
+
+    def __init__(self, anchors, camera):
+        self.models = build_models(list(anchors))
+        params = detector_parameters()
+        self.det = {}
+        for m in self.models:
+            if m.kind != "qr" and m.spec.dictionary_id not in self.det:
+                self.det[m.spec.dictionary_id] = cv2.aruco.ArucoDetector(
+                    cv2.aruco.getPredefinedDictionary(m.spec.dictionary_id), params)
+        self.qr = cv2.QRCodeDetector() if any(m.kind == "qr" for m in self.models) else None
+
+
+_PLAIN_CACHE: dict = {}
+
+
+def plain_opencv_pose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarray) -> np.ndarray | None:
+    """The plain OpenCV way, the benchmark's baseline: world_from_camera (4x4) or None.
+
+    Per frame: ArucoDetector.detectMarkers with CORNER_REFINE_SUBPIX (QR codes: QRCodeDetector
+    detectAndDecodeMulti with matching text), every detected corner of every anchor into one
+    cv2.solvePnP (SOLVEPNP_ITERATIVE) with camera.K and camera.dist; no filtering, no outlier handling.
+    """
+    key = (id(anchors), id(camera))
+    plain = _PLAIN_CACHE.get(key)
+    if plain is None or plain.models[0].spec is not anchors[0]:
+        _PLAIN_CACHE.clear()
+        plain = _PLAIN_CACHE[key] = _Plain(anchors, camera)
+    gray = to_gray(image)
+    obj, img = [], []
+    for d, det in plain.det.items():
+        corners, ids, _ = det.detectMarkers(gray)
+        if ids is None:
+            continue
+        for c, mid in zip(corners, ids.ravel()):
+            for m in plain.models:
+                if m.kind != "qr" and m.spec.dictionary_id == d and int(mid) in m.markers:
+                    obj.append(m.to_world(m.markers[int(mid)]))
+                    img.append(c.reshape(4, 2))
+    if plain.qr is not None:
+        ok, texts, points, _ = plain.qr.detectAndDecodeMulti(gray)
+        if ok:
+            for text, p in zip(texts, points):
+                for m in plain.models:
+                    if m.kind == "qr" and m.spec.text == text:
+                        obj.append(m.to_world(square_corners(m.spec.length)))
+                        img.append(p.reshape(4, 2))
+    if not obj:
+        return None
+    obj = np.concatenate(obj).astype(np.float64)
+    img = np.concatenate(img).astype(np.float64)
+    ok, rvec, tvec = cv2.solvePnP(obj, img, camera.K, camera.dist)
+    if not ok:
+        return None
+    return invert(from_rvec_tvec(rvec, tvec))

@@ -1,0 +1,143 @@
+"""Synthetic scenes (tracking.synth) used by the SLAM tests and benchmark, and a runner that
+tracks a rendered sequence and scores it against its ground truth.
+
+Scenes are desk planes with one ArUco marker; trajectories are given in desk
+coordinates around the marker (metres, seconds).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from tracking.evaluation import TrajectoryMetrics, evaluate
+
+
+def scene_dict(name: str, keys: list[dict], fps: float = 30.0, width: int = 640, height: int = 480,
+               noise: float = 1.5, occluder: dict | None = None, seed: int = 5, marker_length: float = 0.08,
+               supersample: int = 1, dist: list[float] | None = None) -> dict:
+    """A synth scene JSON with a `keyframes` trajectory (keys: t, eye, target)."""
+    duration = float(keys[-1]["t"])
+    effects = {"noise": noise}
+    if occluder:
+        effects["occluder"] = occluder
+    cam = {"width": width, "height": height, "hfov_deg": 62}
+    if dist is not None:
+        cam["dist"] = dist
+    return {
+        "name": name, "seed": seed, "fps": fps, "duration": duration, "camera": cam,
+        "anchors": [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 3, "length": marker_length}],
+        "desk": {"size": [1.6, 1.2], "ppm": 1500, "seed": seed},
+        "trajectory": {"kind": "keyframes", "keys": keys},
+        "effects": effects, "supersample": supersample,
+    }
+
+
+def away_and_back_keys(away_s: float = 5.0, height: float = 0.42) -> list[dict]:
+    """Look at the marker while moving (parallax for the map), pan away so the marker leaves the
+    view for `away_s` seconds, wander there, come back."""
+    h = height
+    keys = [
+        {"t": 0.0, "eye": [-0.12, -0.30, h], "target": [0.0, 0.0, 0.0]},
+        {"t": 1.5, "eye": [0.10, -0.28, h], "target": [0.02, 0.0, 0.0]},
+        {"t": 2.5, "eye": [0.16, -0.25, h], "target": [0.22, 0.05, 0.0]},
+        {"t": 3.0, "eye": [0.22, -0.24, h], "target": [0.42, 0.08, 0.0]},
+    ]
+    t = 3.0
+    wander = [([0.28, -0.20, h], [0.46, 0.12, 0.0]), ([0.22, -0.26, h - 0.03], [0.40, 0.04, 0.0])]
+    step = away_s / (len(wander) + 1)
+    for eye, target in wander:
+        t += step
+        keys.append({"t": round(t, 3), "eye": eye, "target": target})
+    t += step
+    keys.append({"t": round(t, 3), "eye": [0.2, -0.25, h], "target": [0.38, 0.06, 0.0]})
+    keys.append({"t": round(t + 1.0, 3), "eye": [0.08, -0.28, h], "target": [0.05, 0.0, 0.0]})
+    keys.append({"t": round(t + 2.0, 3), "eye": [-0.05, -0.30, h], "target": [0.0, 0.0, 0.0]})
+    return keys
+
+
+def render_sequence(scene_json: dict, frames: slice | None = None):
+    """Rendered frames as a list of (t, BGR image, true world_from_camera), and the scene."""
+    from tracking.synth.renderer import DeskRenderer
+    from tracking.synth.scene import parse_scene
+
+    scene = parse_scene(scene_json)
+    r = DeskRenderer(scene)
+    idx = range(scene.frame_count)
+    if frames is not None:
+        idx = idx[frames]
+    out = []
+    for i in idx:
+        img, pose, t = r.render(i)
+        out.append((t, img, pose))
+    return out, scene
+
+
+def run_tracker(tracker, frames) -> dict:
+    """Track frames [(t, image, true pose)]; returns times, poses (None when lost), states, ms, metrics."""
+    times, poses, states, ms, inl = [], [], [], [], []
+    for t, img, _ in frames:
+        t0 = time.perf_counter()
+        res = tracker.process(img, t)
+        ms.append((time.perf_counter() - t0) * 1000.0)
+        times.append(t)
+        poses.append(res.world_from_camera)
+        states.append(res.state)
+        inl.append(res.inliers)
+    gt_t = np.array([f[0] for f in frames])
+    gt = np.array([f[2] for f in frames])
+    ok = np.array([p is not None for p in poses])
+    est = np.array([p for p in poses if p is not None]).reshape(-1, 4, 4)
+    metrics: TrajectoryMetrics = evaluate(gt_t[ok], est, gt_t, gt)
+    err = np.full(len(frames), np.nan)
+    if ok.any():
+        err[ok] = np.linalg.norm(est[:, :3, 3] - gt[ok][:, :3, 3], axis=1)
+    return {"times": gt_t, "poses": poses, "states": states, "ms": np.array(ms), "inliers": np.array(inl),
+            "metrics": metrics, "errors": err, "ok": ok}
+
+
+def load_recording(folder, frames: slice | None = None):
+    """Frames [(t, BGR image, true world_from_camera)] of a recording folder with groundtruth.tum,
+    and its Session. Times from frames.csv when present, else frame / fps."""
+    from pathlib import Path
+
+    import cv2
+
+    from tracking.errors import SourceError
+    from tracking.poses import read_tum
+    from tracking.session import load_session
+
+    folder = Path(folder)
+    session = load_session(folder)
+    gt_path = folder / "groundtruth.tum"
+    if not gt_path.is_file():
+        raise SourceError(f"{folder}: no groundtruth.tum; scoring needs the true poses")
+    gt_t, gt = read_tum(gt_path)
+    cap = cv2.VideoCapture(str(session.video_path))
+    if not cap.isOpened():
+        raise SourceError(f"{session.video_path}: OpenCV cannot open this video")
+    times = None
+    csv = folder / "frames.csv"
+    if csv.is_file():
+        rows = np.loadtxt(csv, delimiter=",", skiprows=1, ndmin=2)
+        times = dict(zip(rows[:, 0].astype(int), rows[:, 1]))
+    out, i = [], 0
+    wanted = None
+    if frames is not None:
+        wanted = set(range(len(gt_t))[frames])
+    try:
+        while True:
+            ok, img = cap.read()
+            if not ok:
+                break
+            if wanted is None or i in wanted:
+                t = times[i] if times is not None and i in times else i / session.fps
+                j = int(np.argmin(np.abs(gt_t - t)))
+                out.append((float(t), img, gt[j]))
+            i += 1
+            if wanted is not None and i > max(wanted):
+                break
+    finally:
+        cap.release()
+    return out, session

@@ -1,0 +1,217 @@
+"""Per-frame tracking against the map: motion prediction, projection matching, PnP RANSAC,
+robust (Huber) pose-only refinement.
+
+Poses: `world_from_camera` 4x4 (OpenCV camera axes); internally the optimiser
+works on `camera_from_world`. Image points are undistorted pixels (same K).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from tracking.poses import invert, rotation_angle
+from tracking.slam.features import Features, hamming
+
+CHI2_2D = 5.991  # 95 % of a 2-dof chi-square: the inlier bound on squared reprojection error (px^2, sigma 1 px)
+
+
+def exp_se3(xi: np.ndarray) -> np.ndarray:
+    """4x4 rigid transform of a twist (omega (3), v (3)); first-order coupling is enough for small steps."""
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(np.ascontiguousarray(xi[:3], dtype=float))[0]
+    T[:3, 3] = xi[3:]
+    return T
+
+
+def project(K: np.ndarray, cam_from_world: np.ndarray, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Undistorted pixels (N,2) and depths (N,) of world points X (N,3)."""
+    Xc = X @ cam_from_world[:3, :3].T + cam_from_world[:3, 3]
+    z = Xc[:, 2]
+    zs = np.where(np.abs(z) < 1e-9, 1e-9, z)
+    u = K[0, 0] * Xc[:, 0] / zs + K[0, 2]
+    v = K[1, 1] * Xc[:, 1] / zs + K[1, 2]
+    return np.stack([u, v], axis=1), z
+
+
+def refine_pose(K: np.ndarray, world_from_camera: np.ndarray, X: np.ndarray, uv: np.ndarray,
+                weights: np.ndarray | None = None, rounds: int = 2, iterations: int = 6,
+                huber: float = np.sqrt(CHI2_2D), sigma2: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
+    """Pose-only Gauss-Newton with Huber robust weights (IRLS); outliers are dropped between rounds.
+
+    X: world points (N,3); uv: undistorted pixels (N,2); weights: information
+    per point (1 = one-pixel noise; a marker corner measured to 0.5 px gets 4).
+    sigma2: expected squared error per point (px^2) for the inlier test
+    e^2 < 5.991 sigma2 (default 1/weights).
+    Returns (world_from_camera, inlier mask (N,), RMS inlier error in px).
+    """
+    n = X.shape[0]
+    w = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
+    s2 = 1.0 / np.maximum(w, 1e-12) if sigma2 is None else np.asarray(sigma2, dtype=float)
+    T = invert(world_from_camera)
+    fx, fy = K[0, 0], K[1, 1]
+    active = np.ones(n, bool)
+    for rnd in range(rounds):
+        for _ in range(iterations):
+            a = np.nonzero(active)[0]
+            if a.size < 4:
+                break
+            Xc = X[a] @ T[:3, :3].T + T[:3, 3]
+            z = Xc[:, 2]
+            if np.any(z <= 1e-6):
+                good = z > 1e-6
+                active[a[~good]] = False
+                continue
+            iz = 1.0 / z
+            proj = np.stack([fx * Xc[:, 0] * iz + K[0, 2], fy * Xc[:, 1] * iz + K[1, 2]], axis=1)
+            r = proj - uv[a]
+            e = np.sqrt((r**2).sum(1) / s2[a])
+            hw = w[a] * np.where(e <= huber, 1.0, huber / np.maximum(e, 1e-12))
+            # d proj / d Xc
+            x, y = Xc[:, 0], Xc[:, 1]
+            Jp = np.zeros((a.size, 2, 3))
+            Jp[:, 0, 0] = fx * iz
+            Jp[:, 0, 2] = -fx * x * iz * iz
+            Jp[:, 1, 1] = fy * iz
+            Jp[:, 1, 2] = -fy * y * iz * iz
+            # d Xc / d xi for a left perturbation: [-[Xc]x | I]
+            Jx = np.zeros((a.size, 3, 6))
+            Jx[:, 0, 1], Jx[:, 0, 2] = Xc[:, 2], -Xc[:, 1]
+            Jx[:, 1, 0], Jx[:, 1, 2] = -Xc[:, 2], Xc[:, 0]
+            Jx[:, 2, 0], Jx[:, 2, 1] = Xc[:, 1], -Xc[:, 0]
+            Jx[:, 0, 3] = Jx[:, 1, 4] = Jx[:, 2, 5] = 1.0
+            J = (Jp @ Jx).reshape(-1, 6)  # (2n, 6)
+            JW = J * np.repeat(hw, 2)[:, None]
+            H = JW.T @ J
+            g = JW.T @ r.reshape(-1)
+            try:
+                dx = -np.linalg.solve(H + 1e-9 * np.eye(6), g)
+            except np.linalg.LinAlgError:
+                break
+            T = exp_se3(dx) @ T
+            if np.linalg.norm(dx) < 1e-7:
+                break
+        # classify with the current pose; the last round's set is the result
+        proj, z = project(K, T, X)
+        e2 = ((proj - uv) ** 2).sum(1) / s2
+        active = (e2 < CHI2_2D) & (z > 0)
+        if rnd < rounds - 1 and active.sum() < 4:
+            break
+    proj, z = project(K, T, X)
+    e2 = ((proj - uv) ** 2).sum(1)
+    inl = (e2 / s2 < CHI2_2D) & (z > 0)
+    rms = float(np.sqrt(e2[inl].mean())) if inl.any() else float("inf")
+    return invert(T), inl, rms
+
+
+def pnp_ransac(K: np.ndarray, X: np.ndarray, uv: np.ndarray, guess: np.ndarray | None = None,
+               threshold: float = 3.0) -> tuple[np.ndarray | None, np.ndarray]:
+    """RANSAC PnP on undistorted pixels: (world_from_camera or None, inlier mask)."""
+    n = X.shape[0]
+    if n < 6:
+        return None, np.zeros(n, bool)
+    kw = {}
+    if guess is not None:
+        cw = invert(guess)
+        rvec, _ = cv2.Rodrigues(np.ascontiguousarray(cw[:3, :3]))
+        kw = dict(rvec=rvec, tvec=cw[:3, 3].reshape(3, 1).copy(), useExtrinsicGuess=True)
+    ok, rvec, tvec, inl = cv2.solvePnPRansac(
+        np.ascontiguousarray(X, np.float64), np.ascontiguousarray(uv, np.float64), K, None,
+        iterationsCount=100, reprojectionError=threshold, confidence=0.99, flags=cv2.SOLVEPNP_EPNP, **kw)
+    mask = np.zeros(n, bool)
+    if not ok or inl is None or len(inl) < 6:
+        return None, mask
+    mask[inl.ravel()] = True
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(rvec)[0]
+    T[:3, 3] = tvec.ravel()
+    return invert(T), mask
+
+
+def match_by_projection(K: np.ndarray, width: int, height: int, world_from_camera: np.ndarray,
+                        X: np.ndarray, desc: np.ndarray, feats: Features, radius: float,
+                        max_distance: int = 64, ratio: float = 0.9, k: int = 6) -> tuple[np.ndarray, np.ndarray]:
+    """Match map points to features near their predicted projection.
+
+    Returns (point indices, feature indices), one-to-one, best descriptor
+    distance first. A match needs Hamming distance <= max_distance and, when a
+    second candidate exists, to beat it by `ratio`.
+    """
+    if X.shape[0] == 0 or len(feats) == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    uv, z = project(K, invert(world_from_camera), X)
+    vis = (z > 0.02) & (uv[:, 0] > -radius) & (uv[:, 0] < width + radius) & (uv[:, 1] > -radius) & (uv[:, 1] < height + radius)
+    pi = np.nonzero(vis)[0]
+    if pi.size == 0:
+        return np.zeros(0, int), np.zeros(0, int)
+    tree = cKDTree(feats.und)
+    kk = min(k, len(feats))
+    dist, fi = tree.query(uv[pi], k=kk, distance_upper_bound=radius)
+    dist = dist.reshape(pi.size, kk)
+    fi = fi.reshape(pi.size, kk)
+    valid = np.isfinite(dist)
+    fi_safe = np.where(valid, fi, 0)
+    hd = hamming(desc[pi][:, None, :], feats.desc[fi_safe])
+    hd = np.where(valid, hd, 10_000)
+    order = np.argsort(hd, axis=1)
+    best = np.take_along_axis(hd, order[:, :1], 1)[:, 0]
+    second = np.take_along_axis(hd, order[:, 1:2], 1)[:, 0] if kk > 1 else np.full(pi.size, 10_000)
+    bf = np.take_along_axis(fi_safe, order[:, :1], 1)[:, 0]
+    ok = (best <= max_distance) & ((second >= 10_000) | (best < ratio * second) | (second - best >= 8))
+    pi, bf, best = pi[ok], bf[ok], best[ok]
+    # one map point per feature: the closest descriptor wins
+    o = np.argsort(best, kind="stable")
+    pi, bf = pi[o], bf[o]
+    _, first = np.unique(bf, return_index=True)
+    first = np.sort(first)
+    return pi[first], bf[first]
+
+
+@dataclass
+class MotionModel:
+    """Constant-velocity prediction of `world_from_camera` from the last two poses."""
+
+    last: np.ndarray | None = None
+    last_t: float | None = None
+    velocity: np.ndarray | None = None   # (6,) rotvec rad/s (camera frame), translation m/s (world)
+
+    def reset(self) -> None:
+        self.last, self.last_t, self.velocity = None, None, None
+
+    def predict(self, t: float) -> np.ndarray | None:
+        if self.last is None:
+            return None
+        if self.velocity is None or self.last_t is None:
+            return self.last.copy()
+        dt = min(max(t - self.last_t, 0.0), 0.5)
+        T = self.last.copy()
+        T[:3, :3] = self.last[:3, :3] @ Rotation.from_rotvec(self.velocity[:3] * dt).as_matrix()
+        T[:3, 3] = self.last[:3, 3] + self.velocity[3:] * dt
+        return T
+
+    def update(self, pose: np.ndarray, t: float, smoothing: float = 0.5) -> None:
+        if self.last is not None and self.last_t is not None and t - self.last_t > 1e-6 and t - self.last_t < 0.5:
+            dt = t - self.last_t
+            rel = self.last[:3, :3].T @ pose[:3, :3]
+            v = np.concatenate([Rotation.from_matrix(rel).as_rotvec() / dt, (pose[:3, 3] - self.last[:3, 3]) / dt])
+            self.velocity = v if self.velocity is None else smoothing * v + (1 - smoothing) * self.velocity
+        else:
+            self.velocity = None
+        self.last, self.last_t = pose.copy(), t
+
+    def lose(self) -> None:
+        """Forget the velocity after a failed frame, keep the last pose for gating."""
+        self.velocity = None
+
+
+def plausible(pose: np.ndarray, reference: np.ndarray, dt: float, max_speed: float = 2.0,
+              max_angular: float = 4.0, slack_m: float = 0.03, slack_rad: float = 0.15) -> bool:
+    """Whether `pose` can follow `reference` after dt seconds (metres, radians): no teleports."""
+    dt = max(dt, 0.0)
+    d = np.linalg.norm(pose[:3, 3] - reference[:3, 3])
+    a = rotation_angle(reference[:3, :3].T @ pose[:3, :3])
+    return d <= slack_m + max_speed * dt and a <= slack_rad + max_angular * dt

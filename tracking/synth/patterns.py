@@ -1,0 +1,126 @@
+"""Printed anchors as exact cell patterns in their own anchor frame.
+
+Each anchor becomes a `PrintedPattern`: a rectangular array of square tiles
+(one tile per ArUco marker or QR symbol), each tile a grid of black/white
+cells, laid out in "print coordinates" (p, q): p to the right and q down the
+sheet as printed, metres, origin at the first tile's top-left outer corner.
+`anchor_xy = origin + (p * sx, q * sy)` maps them into the anchor frame
+(see shared RECORDING_FORMAT.md for the anchor conventions).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from tracking.errors import SessionError
+from tracking.session import AnchorSpec
+
+
+@dataclass
+class PrintedPattern:
+    """Tiles of `cells x cells` bits (0 black, 1 white), `pitch` apart, each `tile_size` wide (metres).
+
+    `tiles` has shape (rows, cols, cells, cells). `margin` is the white paper
+    around the tiles (metres). `normal_sign` is +1 when the anchor's z axis points
+    out of the paper (aruco, qr), -1 when it points into it (boards).
+    """
+
+    tiles: np.ndarray
+    pitch: float
+    tile_size: float
+    origin: tuple[float, float]
+    sx: float
+    sy: float
+    margin: float
+    normal_sign: float
+
+    @property
+    def extent(self) -> tuple[float, float]:
+        """(width, height) of the tile array in print coordinates, paper margin excluded."""
+        rows, cols = self.tiles.shape[:2]
+        return (cols - 1) * self.pitch + self.tile_size, (rows - 1) * self.pitch + self.tile_size
+
+    def print_coords(self, xa: np.ndarray, ya: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Print coordinates (p, q) of anchor-frame points (xa, ya)."""
+        return (xa - self.origin[0]) * self.sx, (ya - self.origin[1]) * self.sy
+
+    def sample(self, p: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(on_paper mask, value in {0, 1}) at print coordinates; value is 1 (white) off the tiles."""
+        w, h = self.extent
+        m = self.margin
+        on_paper = (p >= -m) & (p < w + m) & (q >= -m) & (q < h + m)
+        rows, cols, n, _ = self.tiles.shape
+        ti = np.floor(p / self.pitch).astype(np.int64)
+        tj = np.floor(q / self.pitch).astype(np.int64)
+        fu = p - ti * self.pitch
+        fv = q - tj * self.pitch
+        on_tile = (ti >= 0) & (ti < cols) & (tj >= 0) & (tj < rows) & (fu < self.tile_size) & (fv < self.tile_size)
+        ci = np.clip(np.floor(fu / self.tile_size * n).astype(np.int64), 0, n - 1)
+        cj = np.clip(np.floor(fv / self.tile_size * n).astype(np.int64), 0, n - 1)
+        value = np.ones(p.shape, np.uint8)
+        sel = on_tile
+        value[sel] = self.tiles[np.clip(tj[sel], 0, rows - 1), np.clip(ti[sel], 0, cols - 1), cj[sel], ci[sel]]
+        return on_paper, value
+
+
+def _aruco_bits(dictionary: int, marker_id: int) -> np.ndarray:
+    """Cells (n+2 square, black border included) of one ArUco marker, 0 black / 1 white."""
+    d = cv2.aruco.getPredefinedDictionary(dictionary)
+    n = d.markerSize + 2
+    img = cv2.aruco.generateImageMarker(d, marker_id, n, borderBits=1)
+    return (img > 127).astype(np.uint8)
+
+
+def qr_modules(text: str) -> np.ndarray:
+    """Modules of the QR symbol for `text` (quiet zone excluded), 0 black / 1 white."""
+    img = cv2.QRCodeEncoder.create().encode(text)
+    if img is None or img.size == 0:
+        raise SessionError(f"qr anchor: OpenCV cannot encode {text!r} as a QR code")
+    dark = img < 128
+    ys, xs = np.nonzero(dark)
+    sym = img[ys.min(): ys.max() + 1, xs.min(): xs.max() + 1]
+    return (sym > 127).astype(np.uint8)
+
+
+def pattern_for(anchor: AnchorSpec) -> PrintedPattern:
+    """The printed pattern of an anchor (aruco, aruco_board, qr)."""
+    if anchor.kind == "aruco":
+        L = anchor.length
+        tiles = _aruco_bits(anchor.dictionary_id, anchor.id)[None, None]
+        # Corner 0 (top-left as printed) is at (-L/2, +L/2): print q grows toward -y.
+        return PrintedPattern(tiles, L, L, (-L / 2, L / 2), 1.0, -1.0, margin=0.25 * L, normal_sign=1.0)
+    if anchor.kind == "qr":
+        L = anchor.length
+        tiles = qr_modules(anchor.text)[None, None]
+        quiet = 4 * L / tiles.shape[-1]
+        return PrintedPattern(tiles, L, L, (-L / 2, L / 2), 1.0, -1.0, margin=quiet * 1.5, normal_sign=1.0)
+    if anchor.kind == "aruco_board":
+        L, s = anchor.marker_length, anchor.separation
+        rows, cols = anchor.markers_y, anchor.markers_x
+        n = cv2.aruco.getPredefinedDictionary(anchor.dictionary_id).markerSize + 2
+        tiles = np.zeros((rows, cols, n, n), np.uint8)
+        for k, mid in enumerate(anchor.marker_ids()):
+            tiles[k // cols, k % cols] = _aruco_bits(anchor.dictionary_id, mid)
+        # GridBoard frame: origin at the first marker's outer corner, x right, y down, z into the paper.
+        return PrintedPattern(tiles, L + s, L, (0.0, 0.0), 1.0, 1.0, margin=max(s, 0.3 * L), normal_sign=-1.0)
+    raise SessionError(f"synth: cannot print a {anchor.kind!r} anchor yet; use aruco, aruco_board or qr")
+
+
+def anchor_corners(anchor: AnchorSpec) -> np.ndarray:
+    """Anchor-frame corners (N, 4, 3) of every marker/symbol, in OpenCV's corner order.
+
+    aruco/qr: one square of side `length` centred at the origin; boards: the
+    GridBoard's own `getObjPoints()`, so this is the reference the detectors use.
+    """
+    if anchor.kind in ("aruco", "qr"):
+        h = anchor.length / 2
+        return np.array([[[-h, h, 0], [h, h, 0], [h, -h, 0], [-h, -h, 0]]], float)
+    if anchor.kind == "aruco_board":
+        d = cv2.aruco.getPredefinedDictionary(anchor.dictionary_id)
+        board = cv2.aruco.GridBoard((anchor.markers_x, anchor.markers_y), anchor.marker_length,
+                                    anchor.separation, d, np.array(anchor.marker_ids()))
+        return np.asarray(board.getObjPoints(), float).reshape(-1, 4, 3)
+    raise SessionError(f"anchor_corners: {anchor.kind!r} anchors are not supported")

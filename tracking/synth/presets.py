@@ -1,0 +1,117 @@
+"""Built-in synthetic scenes (the committed recordings in recordings/ are these presets).
+
+Each preset is a scene dict in the JSON format of tracking.synth.scene.
+Regenerate all of them with `arapp synth all --out recordings --force`.
+"""
+
+from __future__ import annotations
+
+import copy
+
+BOARD = {"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
+         "marker_length": 0.04, "separation": 0.01, "first_id": 0}
+MILD_DIST = [-0.08, 0.04, 0.0005, -0.0005, 0.0]
+
+PRESETS: dict[str, dict] = {
+    # Easy: a GridBoard seen from an orbit over 80 degrees, mild distortion and noise.
+    "board_orbit": {
+        "name": "board_orbit", "seed": 1, "fps": 30, "duration": 3.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": MILD_DIST},
+        "anchors": [BOARD],
+        "desk": {"size": [1.4, 1.1], "ppm": 2000, "seed": 11},
+        "trajectory": {"kind": "orbit", "azimuth_start": -130, "azimuth_end": -50, "distance": 0.45,
+                       "elevation": 55, "elevation_swing": 8},
+        "effects": {"noise": 0.6},
+        "video": {"fourcc": "MJPG", "quality": 85},
+    },
+    # The same board at 1280x720 (wider lens), short.
+    "board_orbit_720p": {
+        "name": "board_orbit_720p", "seed": 2, "fps": 30, "duration": 1.5,
+        "camera": {"width": 1280, "height": 720, "hfov_deg": 70, "dist": MILD_DIST},
+        "anchors": [BOARD],
+        "desk": {"size": [1.5, 1.2], "ppm": 2500, "seed": 12},
+        "trajectory": {"kind": "orbit", "azimuth_start": -60, "azimuth_end": -120, "distance": 0.5,
+                       "elevation": 60, "elevation_swing": 6},
+        "effects": {"noise": 0.6},
+        "video": {"fourcc": "MJPG", "quality": 75},
+        "supersample": 2,
+    },
+    # One marker: a hand covers it (fully from 1.0 s to 3.0 s), then the camera pans away so it is
+    # out of view from about 4.0 s to 5.6 s, and back. For SLAM: the desk texture carries the pose.
+    "marker_occluded": {
+        "name": "marker_occluded", "seed": 3, "fps": 30, "duration": 7.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": MILD_DIST},
+        "anchors": [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 7, "length": 0.06}],
+        "desk": {"size": [1.8, 1.4], "ppm": 1800, "seed": 13},
+        "trajectory": {"kind": "keyframes", "keys": [
+            {"t": 0.0, "eye": [-0.12, -0.32, 0.38], "target": [0.0, 0.0, 0.0]},
+            {"t": 1.5, "eye": [-0.02, -0.33, 0.37], "target": [0.01, 0.01, 0.0]},
+            {"t": 3.0, "eye": [0.08, -0.31, 0.38], "target": [0.02, 0.0, 0.0]},
+            {"t": 4.0, "eye": [0.24, -0.26, 0.38], "target": [0.42, 0.10, 0.0]},
+            {"t": 5.6, "eye": [0.28, -0.22, 0.36], "target": [0.46, 0.14, 0.0]},
+            {"t": 6.4, "eye": [0.10, -0.30, 0.38], "target": [0.02, 0.0, 0.0]},
+            {"t": 7.0, "eye": [0.02, -0.32, 0.38], "target": [0.0, 0.0, 0.0]}],
+            "shake": {"pos_mm": 1.5, "rot_deg": 0.25, "freq_hz": 1.5}},
+        "effects": {"noise": 0.8, "occluder": {"start": 0.8, "end": 3.2, "ramp": 0.2, "anchor": 0}},
+        "video": {"fourcc": "MJPG", "quality": 80},
+    },
+    # A QR code as the world anchor, hand-held orbit.
+    "qr_anchor": {
+        "name": "qr_anchor", "seed": 4, "fps": 30, "duration": 2.5,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 60, "dist": MILD_DIST},
+        "anchors": [{"kind": "qr", "text": "arapp anchor 1", "length": 0.08}],
+        "desk": {"size": [1.4, 1.1], "ppm": 2000, "seed": 14},
+        "trajectory": {"kind": "orbit", "azimuth_start": -110, "azimuth_end": -70, "distance": 0.42,
+                       "elevation": 62, "shake": {"pos_mm": 2.0, "rot_deg": 0.3, "freq_hz": 2.0}},
+        "effects": {"noise": 0.6},
+        "video": {"fourcc": "MJPG", "quality": 85},
+    },
+    # Fast pans (up to ~80 deg/s) with motion blur, exposure changes and JPEG artefacts.
+    "fast_motion": {
+        "name": "fast_motion", "seed": 5, "fps": 30, "duration": 2.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": MILD_DIST},
+        "anchors": [BOARD],
+        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": 15},
+        "trajectory": {"kind": "pan", "azimuth": -90, "distance": 0.5, "elevation": 58, "pan_deg": 22,
+                       "cycles": 1.5, "shake": {"pos_mm": 3.0, "rot_deg": 0.6, "freq_hz": 3.0}},
+        "effects": {"noise": 1.5, "motion_blur": 0.8, "blur_samples": 7,
+                    "exposure": {"amplitude": 0.15, "period": 1.7}, "jpeg_quality": 75, "vignette": 0.15},
+        "video": {"fourcc": "MJPG", "quality": 85},
+        "supersample": 2,
+    },
+    # A camera on a tripod: only sensor noise changes between frames (for pose jitter).
+    "static_camera": {
+        "name": "static_camera", "seed": 6, "fps": 30, "duration": 2.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": MILD_DIST},
+        "anchors": [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 3, "length": 0.05}],
+        "desk": {"size": [1.2, 1.0], "ppm": 2000, "seed": 16},
+        "trajectory": {"kind": "static", "azimuth": -100, "distance": 0.4, "elevation": 60},
+        "effects": {"noise": 2.5},
+        "video": {"fourcc": "MJPG", "quality": 90},
+    },
+    # The AR print preview: a marker on a printer bed (first anchor = bed anchor), slow hand-held orbit.
+    "printer_bed": {
+        "name": "printer_bed", "seed": 7, "fps": 30, "duration": 2.5,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": MILD_DIST},
+        "anchors": [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 42, "length": 0.04}],
+        "desk": {"size": [0.9, 0.8], "ppm": 2200, "seed": 17, "style": "bed"},
+        "trajectory": {"kind": "orbit", "azimuth_start": -120, "azimuth_end": -60, "distance": 0.35,
+                       "elevation": 58, "target": [0.06, 0.06, 0.0],
+                       "shake": {"pos_mm": 1.5, "rot_deg": 0.25, "freq_hz": 1.5}},
+        "effects": {"noise": 0.6},
+        "video": {"fourcc": "MJPG", "quality": 85},
+    },
+}
+
+
+def preset_names() -> list[str]:
+    return list(PRESETS)
+
+
+def preset(name: str) -> dict:
+    """A copy of the named preset's scene dict."""
+    if name not in PRESETS:
+        from tracking.errors import SessionError
+
+        raise SessionError(f"no synthetic preset {name!r}; presets: {', '.join(PRESETS)} (or a scene JSON file)")
+    return copy.deepcopy(PRESETS[name])

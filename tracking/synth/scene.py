@@ -1,0 +1,218 @@
+"""A synthetic scene: camera, anchors on a textured desk, trajectory, effects (JSON format).
+
+Scene JSON (all keys but `anchors` and `trajectory` optional; metres, seconds, degrees):
+
+    {"name": "board_orbit", "seed": 1, "fps": 30, "duration": 4,
+     "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": [k1, k2, p1, p2, k3]}
+               or {"width": ..., "height": ..., "K": [[...]], "dist": [...]},
+     "anchors": [ ...exactly as in session.json... ],
+     "desk": {"size": [1.4, 1.0], "ppm": 2000, "seed": 3, "style": "desk" or "bed"},
+     "trajectory": {"kind": "orbit", ...}            (see tracking.synth.trajectory),
+     "effects": {"noise": 2.0, "motion_blur": 0.0, "blur_samples": 7,
+                 "exposure": {"amplitude": 0.2, "period": 2.0},
+                 "jpeg_quality": null, "vignette": 0.15, "optics_blur": 0.5,
+                 "occluder": {"start": 1.0, "end": 3.0, "anchor": 0}},
+     "video": {"fourcc": "MJPG", "quality": 90},
+     "supersample": 3}
+
+The desk is the world anchor's paper plane (world z = 0); the camera sees it
+from the out-of-paper side. Desk coordinates: x = world x; y "away" and z up
+out of the paper, so for an aruco/qr world the desk frame is the world frame
+and for a board world (z into the paper) it is the world turned over x.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from tracking.camera import Camera
+from tracking.errors import CalibrationError, SessionError
+from tracking.poses import invert
+from tracking.session import AnchorSpec, parse_anchors
+from tracking.synth.patterns import pattern_for
+
+DEFAULT_EFFECTS = {
+    "noise": 0.0,  # sensor noise standard deviation at mid-grey, 8-bit levels
+    "motion_blur": 0.0,  # exposure time as a fraction of the frame interval (0 = sharp)
+    "blur_samples": 7,  # sub-frame renders averaged for motion blur
+    "exposure": None,  # {"amplitude": a, "period": s}: gain 1 + a*sin(2 pi t / period)
+    "jpeg_quality": None,  # extra JPEG round trip at this quality (compression artefacts)
+    "vignette": 0.0,
+    "optics_blur": 0.5,  # lens point-spread, Gaussian sigma in output pixels (symmetric: ground truth unmoved)  # brightness fall-off at the image corners (0..1)
+    "occluder": None,  # {"start": s, "end": s, "anchor": i}: a hand over that anchor
+}
+
+
+@dataclass
+class Scene:
+    """Everything needed to render a synthetic recording deterministically."""
+
+    name: str
+    camera: Camera
+    anchors: list[AnchorSpec]
+    anchor_blocks: list[dict]
+    trajectory: dict
+    fps: float = 30.0
+    duration: float = 4.0
+    seed: int = 0
+    desk_size: tuple[float, float] = (1.4, 1.0)
+    desk_ppm: float = 2000.0
+    desk_seed: int = 0
+    desk_style: str = "desk"
+    effects: dict = field(default_factory=lambda: dict(DEFAULT_EFFECTS))
+    fourcc: str = "MJPG"
+    quality: int = 90
+    supersample: int = 3
+
+    @property
+    def frame_count(self) -> int:
+        return int(round(self.duration * self.fps))
+
+    @property
+    def world_from_desk(self) -> np.ndarray:
+        """Desk frame (z out of the world anchor's paper) in the world frame."""
+        if pattern_for(self.anchors[0]).normal_sign > 0:
+            return np.eye(4)
+        return np.diag([1.0, -1.0, -1.0, 1.0])
+
+    @property
+    def centre_desk(self) -> np.ndarray:
+        """Desk-frame centre of all printed anchors: what trajectories circle around."""
+        desk_from_world = invert(self.world_from_desk)
+        pts = []
+        for a in self.anchors:
+            pat = pattern_for(a)
+            w, h = pat.extent
+            for p, q in ((0, 0), (w, 0), (w, h), (0, h)):
+                xa = pat.origin[0] + p * pat.sx
+                ya = pat.origin[1] + q * pat.sy
+                pw = a.world_from_anchor @ np.array([xa, ya, 0.0, 1.0])
+                pts.append((desk_from_world @ pw)[:3])
+        pts = np.array(pts)
+        return (pts.min(axis=0) + pts.max(axis=0)) / 2
+
+    def to_dict(self) -> dict:
+        return {
+            "name": self.name, "seed": self.seed, "fps": self.fps, "duration": self.duration,
+            "camera": self.camera.to_dict(), "anchors": self.anchor_blocks,
+            "desk": {"size": list(self.desk_size), "ppm": self.desk_ppm, "seed": self.desk_seed,
+                     "style": self.desk_style},
+            "trajectory": self.trajectory, "effects": self.effects,
+            "video": {"fourcc": self.fourcc, "quality": self.quality}, "supersample": self.supersample,
+        }
+
+
+def camera_from_block(block: dict, where: str = "camera") -> Camera:
+    """A Camera from `{width, height, K, dist}` or `{width, height, hfov_deg, dist}` (centred principal point)."""
+    if not isinstance(block, dict):
+        raise SessionError(f"{where}: must be an object with width, height and K or hfov_deg")
+    if "K" in block:
+        try:
+            return Camera.from_dict(block, where)
+        except CalibrationError as e:
+            raise SessionError(str(e)) from None
+    w, h = block.get("width", 640), block.get("height", 480)
+    if not isinstance(w, int) or not isinstance(h, int) or w <= 0 or h <= 0:
+        raise SessionError(f"{where}.width/height: must be positive integers, got {w!r} x {h!r}")
+    hfov = block.get("hfov_deg", 62.0)
+    if not isinstance(hfov, (int, float)) or not 5 < hfov < 170:
+        raise SessionError(f"{where}.hfov_deg: must be a number of degrees between 5 and 170, got {hfov!r}")
+    f = (w / 2) / math.tan(math.radians(hfov) / 2)
+    K = [[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]]
+    try:
+        return Camera(K, block.get("dist", [0, 0, 0, 0, 0]), w, h)
+    except CalibrationError as e:
+        raise SessionError(f"{where}: {e}") from None
+
+
+def parse_scene(data: dict, where: str = "scene") -> Scene:
+    """Validate a scene dict; errors are SessionErrors naming the field."""
+    if not isinstance(data, dict):
+        raise SessionError(f"{where}: must be a JSON object")
+    known = {"name", "seed", "fps", "duration", "camera", "anchors", "desk", "trajectory", "effects", "video",
+             "supersample"}
+    for k in data:
+        if k not in known:
+            raise SessionError(f"{where}.{k}: unknown key (known: {', '.join(sorted(known))})")
+    if "anchors" not in data:
+        raise SessionError(f"{where}.anchors: missing (list of anchors as in session.json)")
+    anchors = parse_anchors(data["anchors"], f"{where}.anchors")
+    for i, a in enumerate(anchors):
+        pattern_for(a)  # raises for kinds the renderer cannot print
+        _check_on_desk(a, pattern_for(anchors[0]).normal_sign, f"{where}.anchors[{i}]")
+    if "trajectory" not in data:
+        raise SessionError(f"{where}.trajectory: missing (e.g. {{\"kind\": \"orbit\"}})")
+    num = {}
+    for key, default, lo in (("fps", 30.0, 1e-3), ("duration", 4.0, 1e-3)):
+        v = data.get(key, default)
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not v >= lo or not math.isfinite(v):
+            raise SessionError(f"{where}.{key}: must be a positive number, got {v!r}")
+        num[key] = float(v)
+    desk = data.get("desk", {})
+    if not isinstance(desk, dict):
+        raise SessionError(f"{where}.desk: must be an object with size, ppm, seed")
+    size = desk.get("size", [1.4, 1.0])
+    if not (isinstance(size, list) and len(size) == 2 and all(isinstance(s, (int, float)) and s > 0 for s in size)):
+        raise SessionError(f"{where}.desk.size: must be [width, height] in metres, got {size!r}")
+    from tracking.synth.texture import STYLES
+
+    style = desk.get("style", "desk")
+    if style not in STYLES:
+        raise SessionError(f"{where}.desk.style: must be one of {', '.join(STYLES)}, got {style!r}")
+    effects = dict(DEFAULT_EFFECTS)
+    user_fx = data.get("effects", {})
+    if not isinstance(user_fx, dict):
+        raise SessionError(f"{where}.effects: must be an object")
+    for k, v in user_fx.items():
+        if k not in DEFAULT_EFFECTS:
+            raise SessionError(f"{where}.effects.{k}: unknown effect (known: {', '.join(DEFAULT_EFFECTS)})")
+        effects[k] = v
+    video = data.get("video", {})
+    ss = data.get("supersample", 3)
+    if not isinstance(ss, int) or not 1 <= ss <= 8:
+        raise SessionError(f"{where}.supersample: must be an integer 1..8, got {ss!r}")
+    scene = Scene(
+        name=str(data.get("name", "synthetic")),
+        camera=camera_from_block(data.get("camera", {}), f"{where}.camera"),
+        anchors=anchors,
+        anchor_blocks=data["anchors"],
+        trajectory=data["trajectory"],
+        fps=num["fps"], duration=num["duration"], seed=int(data.get("seed", 0)),
+        desk_size=(float(size[0]), float(size[1])), desk_ppm=float(desk.get("ppm", 2000.0)),
+        desk_seed=int(desk.get("seed", data.get("seed", 0))), desk_style=style,
+        effects=effects, fourcc=str(video.get("fourcc", "MJPG")), quality=int(video.get("quality", 90)),
+        supersample=ss,
+    )
+    from tracking.synth.trajectory import make_trajectory
+
+    make_trajectory(scene.trajectory, scene.duration, scene.seed, f"{where}.trajectory")  # validate now
+    return scene
+
+
+def _check_on_desk(anchor: AnchorSpec, world_normal_sign: float, where: str) -> None:
+    """The renderer prints anchors on the desk plane, face up: check world_from_anchor allows that."""
+    T = anchor.world_from_anchor
+    out_of_paper_world = T[:3, 2] * pattern_for(anchor).normal_sign
+    desk_up_world = np.array([0.0, 0.0, world_normal_sign])
+    if abs(T[2, 3]) > 1e-9 or not np.allclose(out_of_paper_world, desk_up_world, atol=1e-9):
+        raise SessionError(
+            f"{where}.world_from_anchor: synth prints anchors on the desk (the world anchor's paper plane, "
+            "world z = 0) face up; this transform lifts or tilts the anchor off it"
+        )
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read a scene JSON file."""
+    path = Path(path)
+    if not path.is_file():
+        raise SessionError(f"{path}: scene file does not exist (give a preset name or a JSON file)")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise SessionError(f"{path}: invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}") from None
+    return parse_scene(data, str(path))

@@ -1,0 +1,366 @@
+"""The combined tracker the pipeline uses: anchors (markers, QR) fused with SLAM-style keypoint tracking.
+
+    tr = Tracker(camera, anchors, slam=True)
+    res = tr.process(image_bgr, t)      # TrackResult(world_from_camera, state, markers, inliers, ms)
+    tr.close()                          # stops the mapping / bundle-adjustment thread
+
+Poses are `world_from_camera` 4x4 in the first anchor's frame (metres, OpenCV
+camera axes). States: `marker` (anchors measured this frame and used),
+`slam` (pose from map keypoints only), `lost` (no pose).
+
+Per frame: markers are detected on a worker thread (every frame while lost or
+while the map is young, else every `marker_every`-th frame) while ORB features
+are extracted; map points are matched by projection from a constant-velocity
+prediction; the pose is a robust joint fit of marker corners and map points
+(anchors dominate), or of map points alone, or comes from relocalisation. New
+keyframes go to the mapping thread (triangulation, culling, local bundle
+adjustment with anchor corners as constraints).
+"""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from tracking.camera import Camera
+from tracking.poses import rotation_angle
+from tracking.session import AnchorSpec
+from tracking.slam.features import FeatureExtractor, Features
+from tracking.slam.fusion import PoseBlender, fuse_pose
+from tracking.slam.map import Map
+from tracking.slam.mapping import KeyframeRequest, LocalMapper
+from tracking.slam.relocalise import relocalise
+from tracking.slam.tracking import MotionModel, match_by_projection, plausible, pnp_ransac, refine_pose
+
+MIN_SIDE = 48  # pixels: smaller frames carry nothing trackable
+
+
+@dataclass
+class TrackResult:
+    """One frame's outcome. `world_from_camera` None when lost; `markers` anchors' markers detected
+    this frame (0 on frames where detection was not run); `inliers` PnP inliers (marker corners +
+    map points); `ms` tracking time of the frame in milliseconds."""
+
+    world_from_camera: np.ndarray | None
+    state: str
+    markers: int
+    inliers: int
+    ms: float
+
+
+class Tracker:
+    """Anchors + keypoint SLAM. See the module docstring; parameters:
+
+    slam: False gives marker-only tracking (the anchors' own filtered pose).
+    marker_every: detection period (frames) once the map carries the pose.
+    n_features: ORB keypoints per frame (default scales with resolution).
+    ba: run local bundle adjustment; threaded: mapping on its own thread
+    (False maps inline, deterministic, for tests). max_speed m/s and
+    max_angular rad/s bound plausible motion (faster-looking jumps are rejected).
+    blend_frames: frames over which a seam between sources is faded.
+    max_backlog: with threaded mapping, a new keyframe waits until at most this many earlier ones
+    are still being mapped (bounds the map's lag when frames come faster than mapping can follow,
+    as in offline replay; live, keyframes are several frames apart and mapping one takes less).
+    None: never wait; keyframes are skipped while mapping is behind.
+    """
+
+    def __init__(self, camera: Camera, anchors: list[AnchorSpec], slam: bool = True, *, marker_every: int = 3,
+                 n_features: int | None = None, ba: bool = True, threaded: bool = True, max_speed: float = 2.5,
+                 max_angular: float = 5.0, blend_frames: int = 8, min_inliers: int = 20, radius: float = 12.0,
+                 keyframe_parallax: float = 0.08, corner_weight: float = 4.0, corner_share: float = 1 / 3,
+                 filter: bool = True, max_backlog: int | None = 0):
+        from tracking.anchors import AnchorTracker  # the anchors package is built alongside
+
+        if not anchors:
+            raise ValueError("Tracker needs at least one anchor to define the world frame; "
+                             "list the markers in session.json 'anchors'")
+        self.camera = camera
+        self.slam = bool(slam)
+        self.marker_every = max(1, int(marker_every))
+        self.max_speed, self.max_angular = max_speed, max_angular
+        self.min_inliers = min_inliers
+        self.radius = radius
+        self.keyframe_parallax = keyframe_parallax
+        self.corner_weight = corner_weight
+        self.corner_share = corner_share
+        self.max_backlog = max_backlog
+        self.K = camera.K.copy()
+        # the anchors' own filter smooths the marker-only frames before the map carries the pose
+        self._anchors = AnchorTracker(anchors, camera, filter=filter)
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="anchors") if slam else None
+        if n_features is None:
+            n_features = int(np.clip(camera.width * camera.height / 300, 400, 1500))
+        self.extractor = FeatureExtractor(camera, n_features=n_features)
+        self.map = Map()
+        self.mapper = LocalMapper(self.map, self.K, ba=ba, threaded=threaded) if slam else None
+        self.blender = PoseBlender(blend_frames)
+        self.motion = MotionModel()
+        self._reset_state()
+
+    # -- lifecycle ------------------------------------------------------------------
+    def _reset_state(self) -> None:
+        self._frame = 0
+        self._since_detect = 10**9
+        self._lost = 0
+        self._last_good_t: float | None = None
+        self._last_state = "lost"
+        self._anchored = False
+        self._source = None
+        self._anchor_kfs = 0
+        self._last_out: np.ndarray | None = None
+        self._kf_frame = -(10**9)
+        self._kf_inliers = 0
+        self._depth = 0.5
+
+    def reset(self) -> None:
+        """Forget the map and the motion; the next frame starts from the anchors."""
+        if self.mapper is not None:
+            self.mapper.wait_idle()
+        self.map.clear()
+        self.motion.reset()
+        self.blender.reset()
+        self._anchors.reset()
+        self._reset_state()
+
+    def close(self) -> None:
+        """Stop the mapping thread and the detection worker."""
+        if self.mapper is not None:
+            self.mapper.close()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def wait_mapping(self) -> None:
+        """Block until queued keyframes are mapped (offline replay, tests)."""
+        if self.mapper is not None:
+            self.mapper.wait_idle()
+
+    # -- per frame ------------------------------------------------------------------
+    def _prepare(self, image) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """(image for the anchors, grey image) at the camera's size, or (None, None) if unusable."""
+        if image is None:
+            return None, None
+        img = np.asarray(image)
+        if img.ndim not in (2, 3) or img.shape[0] < MIN_SIDE or img.shape[1] < MIN_SIDE:
+            return None, None
+        if img.dtype != np.uint8:
+            if np.issubdtype(img.dtype, np.floating):
+                img = np.clip(np.nan_to_num(img) * (255.0 if img.max() <= 1.0 else 1.0), 0, 255).astype(np.uint8)
+            else:
+                img = np.clip(img, 0, 255).astype(np.uint8)
+        if img.ndim == 3 and img.shape[2] == 4:
+            img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+        elif img.ndim == 3 and img.shape[2] == 1:
+            img = img[:, :, 0]
+        elif img.ndim == 3 and img.shape[2] != 3:
+            return None, None
+        h, w = img.shape[:2]
+        if (w, h) != self.camera.size:
+            # another resolution of the same lens only if the aspect ratio agrees
+            if abs(w / h - self.camera.width / self.camera.height) > 0.02:
+                return None, None
+            img = cv2.resize(img, self.camera.size, interpolation=cv2.INTER_LINEAR)
+        gray = img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+        bgr = img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+        return bgr, gray
+
+    def process(self, image: np.ndarray, t: float) -> TrackResult:
+        """Track one frame (BGR or grey uint8, camera size) taken at time t seconds."""
+        t0 = time.perf_counter()
+        self._frame += 1
+        bgr, gray = self._prepare(image)
+        usable = gray is not None
+        if usable:
+            small = gray[::8, ::8]
+            m, s = float(small.mean()), float(small.std())
+            usable = 6.0 < m < 250.0 and s > 2.0   # black, blown-out or blank: nothing to see
+        if not usable:
+            return self._lost_frame(t0, 0)
+        if not self.slam:
+            return self._marker_only(bgr, t, t0)
+
+        detect = (self._since_detect + 1 >= self.marker_every or self._lost > 0 or len(self.map.points) < 60
+                  or self.motion.last is None)
+        fut = self._pool.submit(self._anchors.process, bgr, t) if detect else None
+        feats = self.extractor.extract(gray)
+        ar = fut.result() if fut is not None else None
+        self._since_detect = 0 if detect else self._since_detect + 1
+
+        anchor_pose = None
+        corners_w = np.zeros((0, 3))
+        corners_uv = np.zeros((0, 2))
+        markers = 0
+        if ar is not None and ar.raw_world_from_camera is not None and len(ar.object_points) >= 4:
+            anchor_pose = np.asarray(ar.raw_world_from_camera, float)
+            corners_w = np.asarray(ar.object_points, float).reshape(-1, 3)
+            corners_uv = self.camera.undistort_points(np.asarray(ar.image_points, float).reshape(-1, 2))
+            markers = int(ar.markers)
+
+        pred = self.motion.predict(t)
+        ids, X, D = self.map.arrays()
+        pose, state, inliers, inl_ids, inl_feat = None, "lost", 0, np.zeros(0, int), np.zeros(0, int)
+        inl_xyz = np.zeros((0, 3))
+        source, out_pose = None, None
+
+        if anchor_pose is not None:
+            init = anchor_pose
+            if pred is not None and self._lost == 0 and not self._plausible(anchor_pose, pred, t):
+                init = pred  # a flipped planar solution: let the corners pull from the tracked pose
+            pi, fi = self._match(init, X, D, feats, self.radius)
+            p, cin, min_, _ = fuse_pose(self.K, init, corners_w, corners_uv, X[pi], feats.und[fi], self.corner_weight,
+                                      corner_share=self.corner_share)
+            if cin.mean() < 0.75 and init is not anchor_pose:
+                p, cin, min_, _ = fuse_pose(self.K, anchor_pose, corners_w, corners_uv, X[pi], feats.und[fi],
+                                            self.corner_weight, corner_share=self.corner_share)
+            if cin.mean() < 0.75:
+                # the map disagrees with the markers: trust the markers, the map gets corrected by BA
+                p, cin, _ = refine_pose(self.K, anchor_pose, corners_w, corners_uv)
+                min_ = np.zeros(pi.size, bool)
+            pose, state = p, "marker"
+            if min_.sum() < self.min_inliers and ar.world_from_camera is not None:
+                source = "anchors"     # the map does not help yet: the anchors' filtered pose
+                out_pose = np.asarray(ar.world_from_camera, float)
+            inliers = int(cin.sum() + min_.sum())
+            inl_ids, inl_feat, inl_xyz = ids[pi[min_]], fi[min_], X[pi[min_]]
+            visible = ids[pi]
+        else:
+            visible = np.zeros(0, int)
+            if pred is not None and X.shape[0] >= self.min_inliers:
+                p, pi, fi, inl = self._track_map(pred, X, D, feats)
+                if p is not None and self._plausible(p, self.motion.last, t):
+                    pose, state, inliers = p, "slam", int(inl.sum())
+                    inl_ids, inl_feat, inl_xyz = ids[pi[inl]], fi[inl], X[pi[inl]]
+                    visible = ids[pi]
+            if pose is None and X.shape[0] >= self.min_inliers and len(feats) >= self.min_inliers:
+                p, n = relocalise(self.map, feats, self.K, near=self.motion.last)
+                if p is not None:
+                    # confirm by projection matching from the relocalised pose
+                    p2, pi, fi, inl = self._track_map(p, X, D, feats)
+                    if p2 is not None and (self.motion.last is None or self._plausible(p2, self.motion.last, t, lost=True)):
+                        pose, state, inliers = p2, "slam", int(inl.sum())
+                        inl_ids, inl_feat, inl_xyz = ids[pi[inl]], fi[inl], X[pi[inl]]
+                        visible = ids[pi]
+
+        if pose is None:
+            return self._lost_frame(t0, markers)
+
+        self.map.count_matches(visible, inl_ids)
+        self._maybe_keyframe(t, pose, feats, inl_ids, inl_feat, corners_w, corners_uv, state, inl_xyz, inliers)
+        anchored = state == "marker" or (self._anchored and self._since_detect < self.marker_every)
+        if source is None:
+            source = "fused" if anchored else "map"
+        out = self._output(pose if out_pose is None else out_pose, pred, source)
+        self._anchored = anchored
+        self.motion.update(pose, t)
+        self._lost = 0
+        self._last_good_t = t
+        self._last_state = state
+        self._last_out = out
+        return TrackResult(out, state, markers, inliers, (time.perf_counter() - t0) * 1000.0)
+
+    # -- pieces ---------------------------------------------------------------------
+    def _plausible(self, pose, ref, t, lost: bool = False) -> bool:
+        if ref is None:
+            return True
+        dt = (t - self._last_good_t) if self._last_good_t is not None else 0.0
+        if lost:
+            # after a gap the camera may have moved, but not further than walking pace allows
+            return plausible(pose, ref, dt, self.max_speed, self.max_angular, 0.10, 0.5)
+        return plausible(pose, ref, dt, self.max_speed, self.max_angular)
+
+    def _match(self, pose, X, D, feats: Features, radius: float):
+        return match_by_projection(self.K, self.camera.width, self.camera.height, pose, X, D, feats, radius)
+
+    def _track_map(self, init, X, D, feats):
+        """Pose from map points alone: projection matching, Huber refinement, RANSAC and wider search as fallbacks."""
+        for radius in (self.radius, 3 * self.radius):
+            pi, fi = self._match(init, X, D, feats, radius)
+            if pi.size < self.min_inliers:
+                continue
+            p, inl, _ = refine_pose(self.K, init, X[pi], feats.und[fi])
+            if inl.sum() < max(self.min_inliers, 0.4 * pi.size):
+                pr, mask = pnp_ransac(self.K, X[pi], feats.und[fi], guess=init)
+                if pr is None or mask.sum() < self.min_inliers:
+                    continue
+                p, inl, _ = refine_pose(self.K, pr, X[pi][mask], feats.und[fi][mask])
+                full = np.zeros(pi.size, bool)
+                full[np.nonzero(mask)[0][inl]] = True
+                inl = full
+            if inl.sum() >= self.min_inliers:
+                return p, pi, fi, inl
+        return None, None, None, None
+
+    def _maybe_keyframe(self, t, pose, feats, inl_ids, inl_feat, corners_w, corners_uv, state, inl_xyz, inliers):
+        if self.mapper is None or len(feats) < 50:
+            return
+        # scene depth from what we see: matched map points, else the anchors
+        pts = inl_xyz if len(inl_xyz) else corners_w
+        if len(pts):
+            d = np.linalg.norm(pts - pose[:3, 3], axis=1)
+            self._depth = float(np.median(d))
+        nkf = len(self.map.keyframes)
+        if self.max_backlog is None and self.mapper.pending > 2:
+            return
+        if nkf == 0 and self.mapper.pending == 0:
+            need = state == "marker"
+        elif state == "marker" and self._anchor_kfs < 8 and self._frame - self._kf_frame >= 5:
+            need = True   # early on, every anchor keyframe averages marker noise out of the map
+        else:
+            if self._frame - self._kf_frame < 3:
+                return
+            near = self.map.nearest_keyframes(pose, 1)
+            if not near:
+                return
+            kf = near[0]
+            moved = np.linalg.norm(kf.centre - pose[:3, 3]) > self.keyframe_parallax * self._depth
+            turned = rotation_angle(kf.pose[:3, :3].T @ pose[:3, :3]) > np.radians(8)
+            thin = inliers < 0.7 * self._kf_inliers
+            need = moved or turned or thin
+            if state == "slam":
+                need = need and inliers >= 30  # do not grow the map from a weak keypoint-only pose
+        if not need:
+            return
+        if self.max_backlog is not None:
+            self.mapper.wait_backlog(self.max_backlog)
+        pid = np.full(len(feats), -1, int)
+        pid[inl_feat] = inl_ids
+        self.mapper.submit(KeyframeRequest(t, pose.copy(), feats, pid, corners_w if state == "marker" else None,
+                                           corners_uv if state == "marker" else None))
+        self._kf_frame = self._frame
+        self._kf_inliers = max(inliers, 1)
+        self._anchor_kfs += state == "marker"
+
+    def _output(self, pose, pred, source: str) -> np.ndarray:
+        """Seamless output: fade the step when the source (anchors / fused / map) changes, or after a short loss."""
+        changed = source != self._source
+        self._source = source
+        if self._last_out is not None and pred is not None and self._lost < 5 and (changed or self._lost > 0):
+            # where the output would have gone: the last output moved by the predicted camera motion
+            target = self._last_out @ np.linalg.inv(self.motion.last) @ pred
+            self.blender.switch(pose, target)
+        return self.blender.apply(pose)
+
+    def _lost_frame(self, t0: float, markers: int) -> TrackResult:
+        self._lost += 1
+        self.motion.lose()
+        self.blender.reset()
+        self._last_state = "lost"
+        return TrackResult(None, "lost", markers, 0, (time.perf_counter() - t0) * 1000.0)
+
+    def _marker_only(self, bgr, t, t0) -> TrackResult:
+        ar = self._anchors.process(bgr, t)
+        if ar.world_from_camera is None:
+            return self._lost_frame(t0, int(ar.markers))
+        self._lost = 0
+        return TrackResult(np.asarray(ar.world_from_camera, float), "marker", int(ar.markers), int(ar.inliers),
+                           (time.perf_counter() - t0) * 1000.0)
