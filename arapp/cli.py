@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 # (subcommand, module under arapp.commands); the order is the order in --help.
@@ -48,6 +49,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    # PyOpenGL binds its platform on first import; the overlay renders offscreen (EGL, else OSMesa:
+    # arapp.render.select_platform falls back), also on a desktop where GLX would be the default.
+    os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:

@@ -63,13 +63,14 @@ def toolpath_line_sets(layers, bed_size: tuple[float, float, float], layer: int 
     dimmed (None: all layers in full colour). current: the layer being
     printed, drawn in `CURRENT_COLOUR` (takes precedence). Moves outside the
     build volume are drawn red and the bed outline turns red: the warning.
+    Segments are grouped by kind and role so a whole print is a handful of
+    line sets (each uploaded to the GPU once).
     """
     from arapp.render.modes import LineSet
 
     width, depth, height = bed_size
     top = len(layers) - 1 if layer is None else min(int(layer), len(layers) - 1)
-    sets = []
-    any_outside = False
+    groups: dict[tuple, list] = {}  # (colour, width_px) -> list of (N, 2, 3) segment arrays
     for gl in layers[: top + 1]:
         full = layer is None or gl.index == top
         for kind, rgba in KIND_COLOURS.items():
@@ -79,16 +80,19 @@ def toolpath_line_sets(layers, bed_size: tuple[float, float, float], layer: int 
             if not len(seg):
                 continue
             outside = out_of_bed(seg, width, depth, height)
-            any_outside |= bool(outside.any())
-            inside = seg[~outside]
-            colour = rgba if full else (*rgba[:3], rgba[3] * DIM_ALPHA)
+            colour = tuple(rgba) if full else (*rgba[:3], rgba[3] * DIM_ALPHA)
             if current is not None and gl.index == current and kind != "travel":
                 colour = CURRENT_COLOUR
             width_px = 1.0 if kind == "travel" else (2.0 if full else 1.0)
-            if len(inside):
-                sets.append(LineSet(list(inside), colour, width_px, 0.0))
+            groups.setdefault((colour, width_px), []).append(seg[~outside])
             if outside.any():
-                sets.append(LineSet(list(seg[outside]), OUT_OF_BED_COLOUR, 3.0, 0.0))
+                groups.setdefault((OUT_OF_BED_COLOUR, 3.0), []).append(seg[outside])
+    sets = []
+    for (colour, width_px), parts in groups.items():
+        seg = np.concatenate(parts)
+        if len(seg):
+            sets.append(LineSet(seg, colour, width_px, 0.0))
+    any_outside = (OUT_OF_BED_COLOUR, 3.0) in groups
     outline_colour = OUT_OF_BED_COLOUR if any_outside else BED_OUTLINE_COLOUR
     sets.append(LineSet([bed_outline(width, depth)], outline_colour, 3.0 if any_outside else 2.0, 0.0))
     return sets
@@ -118,3 +122,38 @@ def toolpath_overlay(gcode_path: str | Path, printer_path: str | Path | None, an
     bed = (profile.bed.width, profile.bed.depth, profile.bed.height)
     sets = toolpath_line_sets(layers, bed, layer, current)
     return sets, world_from_bed(anchors[0].world_from_anchor, profile.bed_from_anchor)
+
+
+class PrintProgressOverlay:
+    """The toolpaths of a running print with the layer being printed highlighted.
+
+    Fed by a print link's progress reports (`arapp.printing.link.Progress`,
+    whose `layer` counts from the printer's acknowledgements), never by a
+    timer. `line_sets()` is rebuilt only when the highlighted layer changes.
+    """
+
+    def __init__(self, layers, bed_size: tuple[float, float, float]):
+        self.layers = layers
+        self.bed_size = bed_size
+        self.current = -1
+        self.percent = 0.0
+        self._sets = None
+
+    def update(self, progress) -> bool:
+        """Take a progress report; True when the highlighted layer changed."""
+        self.percent = float(getattr(progress, "percent", self.percent))
+        layer = int(getattr(progress, "layer", -1))
+        if layer == self.current:
+            return False
+        self.current = layer
+        self._sets = None
+        return True
+
+    def line_sets(self) -> list:
+        """Layers printed so far dimmed, the current one highlighted (all layers before the print starts)."""
+        if self._sets is None:
+            if self.current < 0:
+                self._sets = toolpath_line_sets(self.layers, self.bed_size)
+            else:
+                self._sets = toolpath_line_sets(self.layers, self.bed_size, layer=self.current, current=self.current)
+        return self._sets

@@ -1,7 +1,5 @@
 """AnchorTracker against ground truth on rendered views (tracking.anchors.render, checked here too)."""
 
-import copy
-
 import cv2
 import numpy as np
 import pytest
@@ -233,3 +231,26 @@ def test_ambiguous_marker_stays_on_its_branch(cam):
                                          for p in (res.raw_world_from_camera, res.world_from_camera)))
         assert not any(wrong), (seed, np.flatnonzero(wrong))
     assert total_lowest_wrong >= 10, "the noise must make the lowest-error solution flip in some frames"
+
+
+def test_charuco_pose(cam):
+    an = parse_anchors([{"kind": "charuco", "dictionary": "DICT_5X5_100", "squares_x": 5, "squares_y": 4,
+                         "square_length": 0.03, "marker_length": 0.022}])
+    gt = look_at([0.02, 0.12, -0.35], [0.075, 0.06, 0.0], up=(0, -1, 0))
+    res = AnchorTracker(an, cam).process(render_view(an, cam, gt, noise_std=2.0), 0.0)
+    assert res.world_from_camera is not None
+    assert res.inliers == 12  # the 4x3 inner chessboard corners
+    assert pos_err(res.raw_world_from_camera, gt) < 0.002 * 0.36
+    assert res.reprojection_error < 0.5
+
+
+def test_board_and_qr_fused(cam):
+    an = parse_anchors([BOARD, dict(QR, world_from_anchor=on_board(0.26, 0.07))])
+    gt = look_at([0.14, 0.25, -0.45], [0.16, 0.07, 0.0], up=(0, -1, 0))
+    tr = AnchorTracker(an, cam)
+    res = tr.process(render_view(an, cam, gt, noise_std=2.0), 0.0)
+    assert res.anchors_seen == [0, 1] and res.markers == 13
+    assert pos_err(res.raw_world_from_camera, gt) < 0.001 * 0.5
+    # the QR code's points are in the world frame: they reproject onto its drawn corners
+    qr_world = np.asarray(an[1].world_from_anchor) @ np.array([[-0.03, 0.03, 0, 1.0], [0.03, -0.03, 0, 1.0]]).T
+    assert any(np.allclose(p, qr_world[:3, 0], atol=0.002) for p in res.object_points)

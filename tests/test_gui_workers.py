@@ -254,3 +254,90 @@ def test_processor_applies_commands_between_frames_and_redraws_when_paused():
     proc.stop()
     proc.join(2.0)
     assert not proc.is_alive()
+
+
+def test_gui_recorder_writes_a_recording_that_replays(tmp_path):
+    """The record button's writer: frames handed over from the capture thread come back from the recording."""
+    from arapp.gui.recording import GuiRecorder, new_recording_folder
+    from arapp.gui.workers import Captured
+    from tracking.camera import Camera
+    from tracking.session import parse_anchors
+    from tracking.sources import RecordingSource
+
+    cam = Camera(np.array([[300.0, 0, 79.5], [0, 300.0, 59.5], [0, 0, 1]]), np.zeros(5), 160, 120)
+    anchors = parse_anchors([{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 3, "length": 0.05}])
+    folder = new_recording_folder(tmp_path)
+    rec = GuiRecorder(folder, cam, 25.0, anchors)
+    import cv2
+
+    images = []
+    for i in range(10):  # smooth pictures (JPEG-friendly) that differ from frame to frame
+        img = np.zeros((120, 160, 3), np.uint8)
+        img[:, :, 1] = np.linspace(0, 200, 160)[None, :].astype(np.uint8)
+        cv2.rectangle(img, (10 + 12 * i, 30), (40 + 12 * i, 80), (255, 255, 255), -1)
+        images.append(img)
+    t0 = 100.0
+    for i, img in enumerate(images):
+        rec.write(Captured(i, t0 + i * 0.04, img, time.perf_counter()))
+    session = rec.close()
+    assert session.anchors[0].id == 3 and session.camera.width == 160
+    with RecordingSource(folder) as src:
+        frames = list(src)
+    assert len(frames) == 10 and rec.dropped == 0
+    assert np.allclose([f.t for f in frames], np.arange(10) * 0.04, atol=1e-6)
+    # each frame comes back as itself, in order (MJPG is lossy, but far closer to itself than to a neighbour)
+    for k in (0, 5, 9):
+        err = [np.abs(frames[k].image.astype(int) - im.astype(int)).mean() for im in images]
+        assert int(np.argmin(err)) == k and err[k] < 4
+    assert new_recording_folder(tmp_path) != folder  # never reuses an existing folder
+
+
+def test_a_camera_lost_mid_stream_is_reported_not_raised():
+    """tracking.sources ends a vanished camera's stream with `.error` set; the player turns it into a
+    'Camera lost' report with that message and ends cleanly."""
+    from arapp.gui.workers import Player
+
+    class DyingCamera(ListSource):
+        kind = "v4l2"
+
+        def __init__(self):
+            super().__init__(5)
+            self.error = None
+
+        def __next__(self):
+            if self.pos == 3:
+                self.error = "V4L2 /dev/video0 stopped delivering frames after 3 frames (unplugged?)"
+                raise StopIteration
+            return super().__next__()
+
+    src = DyingCamera()
+    errors = []
+    slot = LatestSlot()
+    p = Player(lambda: src, slot, on_error=lambda title, msg: errors.append((title, msg)))
+    p.start()
+    p.join(5.0)
+    assert not p.is_alive()
+    assert errors == [("Camera lost", src.error)]
+    assert src.closed
+
+
+def test_marker_sheets_print_the_anchors_in_use(tmp_path):
+    """The tracking panel's 'Marker sheets' button: the sheet of each anchor is detected as that anchor."""
+    import cv2
+
+    from arapp.gui.sheets import save_sheets
+
+    blocks = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
+               "marker_length": 0.04, "separation": 0.01, "first_id": 0},
+              {"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 20, "length": 0.05,
+               "world_from_anchor": [[1, 0, 0, 0.3], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]}]
+    paths = save_sheets(blocks, tmp_path, dpi=100)
+    pngs = sorted(p for p in paths if p.suffix == ".png")
+    assert [p.name.split("_")[0] for p in pngs] == ["anchor0", "anchor1"]
+    assert all(p.with_suffix(".pdf").is_file() for p in pngs)
+    detector = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
+    found = []
+    for p in pngs:
+        ids = detector.detectMarkers(cv2.imread(str(p)))[1]
+        found.append(sorted(int(i) for i in (np.zeros(0) if ids is None else ids).ravel()))
+    assert found == [list(range(12)), [20]]

@@ -269,3 +269,25 @@ def test_checksum_matches_virtual_printer():
         for n, cmd in [(0, "M110 N0"), (17, "G1 X10.5 Y-3 E0.25 F1800"), (123456, "M104 S210")]:
             body, star, cs = frame(n, cmd).decode().strip().rpartition("*")
             assert int(cs) == vp.printer._calculate_checksum(body.encode())
+
+
+def test_cancel_during_heat_wait_sends_m108_then_cools():
+    gcode = ["M140 S28", "M190 S28"] + make_gcode(50, layers=1)
+    with VirtualPrinterPty(simulated_errors=[]) as vp:
+        p = connect(vp)
+
+        def on_progress(s):
+            if s.state == "heating":
+                p.cancel()
+
+        state = p.print_gcode(gcode, progress=on_progress)
+        p.close()
+        executed = list(vp.executed)
+        bed = vp.printer.bedTargetTemp
+    assert state.status == "cancelled"
+    # M108 (break the wait; Marlin's emergency parser acts on it at once) right after the wait.
+    i = executed.index("M190 S28")
+    assert executed[i + 1] == "M108"
+    assert executed[i + 2 : i + 5] == ["M104 S0", "M140 S0", "M107"]
+    assert not any(c.startswith("G1 X") for c in executed)  # nothing of the part was printed
+    assert bed == 0

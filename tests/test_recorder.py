@@ -46,18 +46,22 @@ def test_round_trip_from_a_file_backed_source_is_frame_for_frame(rec, tmp_path):
         assert x.index == y.index and x.t == pytest.approx(y.t, abs=1e-6)
         np.testing.assert_array_equal(x.image, y.image)
     assert (out / "frames.csv").read_text().splitlines()[0] == "frame,t"
+    # re-recording a recording keeps its anchors when none are given
+    with open_source(str(out)) as src:
+        third = record(src, tmp_path / "third", max_frames=2, progress=lambda s: None)
+    assert [a.to_dict() for a in load_session(third.folder).anchors] == [a.to_dict() for a in again.anchors]
 
 
 def test_mjpg_recording_is_close_to_the_source(rec, tmp_path):
     with open_source(str(rec)) as src:
-        record(src, tmp_path / "m", progress=lambda s: None)  # default MJPG, default anchors
+        record(src, tmp_path / "m", progress=lambda s: None)  # default MJPG, the source's anchors
     with RecordingSource(tmp_path / "m") as b:
         frames = list(b)
     assert len(frames) == len(TIMES) and b.session.video == "video.avi"
     for f in frames:
         err = np.abs(f.image.astype(float) - frame_image(f.index)).mean()
         assert err < 4.0
-    assert b.session.anchors[0].kind == "aruco"
+    assert [a.to_dict() for a in b.session.anchors] == [a.to_dict() for a in RecordingSource(rec).session.anchors]
 
 
 def test_existing_recording_is_not_overwritten_without_force(rec, tmp_path):

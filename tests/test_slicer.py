@@ -268,3 +268,30 @@ def test_prusa_option_says_clearly_when_prusaslicer_is_missing(tmp_path, monkeyp
     assert main(["slice", str(stl), "-o", str(tmp_path / "c.gcode"), "--slicer", "prusa"]) == 2
     err = capsys.readouterr().err
     assert "prusa-slicer" in err and "not installed" in err and "--slicer builtin" in err
+
+
+def test_printer_profile_sets_bed_nozzle_filament_and_gcode(tmp_path):
+    import json
+
+    from arapp.printing import load_profile
+
+    path = tmp_path / "small.json"
+    path.write_text(json.dumps({
+        "format": "arapp-printer/1", "name": "Tiny", "bed": {"width": 60, "depth": 50, "height": 40},
+        "nozzle_diameter": 0.6, "filament_diameter": 2.85,
+        "start_gcode": "G28 ; tiny home\nG29 ; level", "end_gcode": "M84 ; tiny done"}))
+    profile = load_profile(path)
+    cube = trimesh.creation.box(extents=(30, 30, 3))
+    r = slice_mesh(cube, SliceSettings(), profile)
+    text = r.gcode
+    assert "G28 ; tiny home\nG29 ; level" in text and text.rstrip().endswith("M84 ; tiny done")
+    assert "line width = 0.675" in text
+    layers = parse_gcode(text)
+    area = np.pi * (2.85 / 2) ** 2
+    m = next(m for m in layers[3].moves if m.extruding)
+    length = np.hypot(m.end[0] - m.start[0], m.end[1] - m.start[1])
+    assert m.e == pytest.approx(0.675 * 0.2 * length / area, abs=8e-5)
+    xy = np.concatenate([l.segments(extruding=False).reshape(-1, 3) for l in layers])
+    assert (xy[:, 0].min() + xy[:, 0].max()) / 2 == pytest.approx(30.0, abs=0.5)  # centred on this bed
+    with pytest.raises(ModelDoesNotFitError, match="Tiny"):
+        slice_mesh(trimesh.creation.box(extents=(50, 20, 5)), SliceSettings(), profile)  # 50 + 2 x 6.7 skirt > 60

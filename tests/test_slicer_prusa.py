@@ -96,6 +96,14 @@ def test_filament_within_15_percent(both):
     assert abs(ours.filament_mm - prusa_mm) / prusa_mm < 0.15, (name, ours.filament_mm, prusa_mm)
 
 
+def test_print_time_estimate_near_prusaslicers(both):
+    # our estimate (trapezoid moves, stops at sharp corners) against PrusaSlicer's own machine model
+    name, ours, theirs, _, _ = both
+    assert read_stats(theirs.gcode)["print_time_s"] == theirs.print_time_s
+    assert abs(ours.print_time_s - theirs.print_time_s) / theirs.print_time_s < 0.3, (name, ours.print_time_s,
+                                                                                    theirs.print_time_s)
+
+
 def test_extrusions_inside_the_slice_and_nothing_off_the_bed(both):
     name, ours, theirs, _, profile = both
     _check_inside_and_on_bed(ours, profile, f"{name} built-in")

@@ -226,3 +226,159 @@ def test_arapp_sources_lists_devices_or_says_none(monkeypatch, capsys):
     out = capsys.readouterr().out
     assert "v4l2:/dev/video0" in out and "HD Webcam" in out and "depthai:14442C10" in out
     assert "No camera is attached" not in out
+
+
+class FakeCapture:
+    """Stands in for cv2.VideoCapture on a V4L2 device: grants 320x240 MJPG, then 'unplugs' after 4 reads."""
+
+    def __init__(self, path, api=None):
+        self.path, self.props, self.reads = path, {}, 0
+
+    def isOpened(self):
+        return True
+
+    def set(self, prop, value):
+        self.props[prop] = value
+        return True
+
+    def get(self, prop):
+        if prop == cv2.CAP_PROP_FOURCC:
+            return float(cv2.VideoWriter_fourcc(*"MJPG"))
+        if prop == cv2.CAP_PROP_FPS:
+            return 25.0
+        if prop == cv2.CAP_PROP_POS_MSEC:
+            return 1000.0 + 40.0 * self.reads  # driver timestamps, ms
+        return 0.0
+
+    def read(self):
+        self.reads += 1
+        if self.reads > 4:
+            return False, None
+        return True, np.full((240, 320, 3), self.reads, np.uint8)
+
+    def release(self):
+        pass
+
+
+def test_v4l2_reports_granted_mode_and_a_vanishing_camera(monkeypatch, tmp_path):
+    import tracking.sources as sources
+
+    real_exists = sources.os.path.exists
+    monkeypatch.setattr(sources.os.path, "exists", lambda p: p == "/dev/video7" or real_exists(p))
+    monkeypatch.setattr(sources.os, "access", lambda p, mode: True)
+    monkeypatch.setattr(sources.cv2, "VideoCapture", FakeCapture)
+    CAM.save_yaml(tmp_path / "cam.yaml")  # 160x120 calibration, scaled to the granted 320x240
+    with open_source("v4l2:7", width=1920, height=1080, fps=60, calibration=tmp_path / "cam.yaml") as src:
+        assert src.granted == {"width": 320, "height": 240, "fps": 25.0, "fourcc": "MJPG"}
+        assert src.requested == {"width": 1920, "height": 1080, "fps": 60, "fourcc": "MJPG"}
+        assert src.info["device"] == "/dev/video7" and src.camera.width == 320
+        assert src._cap.props[cv2.CAP_PROP_FOURCC] == cv2.VideoWriter_fourcc(*"MJPG")
+        with pytest.warns(SourceWarning, match="stopped delivering frames after 4 frames"):
+            frames = list(src)
+    assert [f.index for f in frames] == [0, 1, 2, 3]
+    np.testing.assert_allclose([f.t for f in frames], [0.0, 0.04, 0.08, 0.12])
+    assert "/dev/video7" in src.error and "unplugged" in src.error
+
+
+def test_depthai_source_reads_the_device_calibration(monkeypatch):
+    """The depthai v3 call sequence, against a stand-in module (no OAK device in CI)."""
+    import sys
+    import types
+    from datetime import timedelta
+
+    calls = []
+
+    class Info:
+        name, state = "1.2.3", "X_LINK_UNBOOTED"
+
+        def __init__(self, ident):
+            self.ident = ident
+
+        def getDeviceId(self):
+            return self.ident
+
+    class Calib:
+        def getCameraIntrinsics(self, socket, w, h):
+            calls.append(("intrinsics", socket, w, h))
+            return [[800.0, 0, 639.5], [0, 800.0, 359.5], [0, 0, 1]]
+
+        def getDistortionCoefficients(self, socket):
+            return [0.1, -0.05, 0, 0] + [0.0] * 10
+
+    class Msg:
+        def __init__(self, seq):
+            self.seq = seq
+
+        def getCvFrame(self):
+            return np.zeros((720, 1280, 3), np.uint8)
+
+        def getTimestamp(self):
+            return timedelta(seconds=50 + self.seq / 30)
+
+        def getSequenceNum(self):
+            return self.seq
+
+        def getTransformation(self):
+            raise AttributeError("older depthai: no transformation")
+
+    class Queue:
+        def __init__(self):
+            self.seqs = [10, 11, 13]  # frame 12 dropped on the device
+
+        def get(self, timeout):
+            return Msg(self.seqs.pop(0)) if self.seqs else None
+
+    class Output:
+        def createOutputQueue(self, maxSize, blocking):
+            return Queue()
+
+    class CameraNode:
+        def build(self, socket):
+            calls.append(("build", socket))
+            return self
+
+        def requestOutput(self, size, type, fps):
+            calls.append(("output", size, type, fps))
+            return Output()
+
+    class Pipeline:
+        def __init__(self, device):
+            self.device = device
+
+        def create(self, node):
+            return CameraNode()
+
+        def start(self):
+            calls.append("start")
+
+        def stop(self):
+            calls.append("stop")
+
+    class Device:
+        @staticmethod
+        def getAllAvailableDevices():
+            return [Info("AAA"), Info("BBB")]
+
+        def __init__(self, info):
+            calls.append(("open", info.getDeviceId()))
+
+        def readCalibration(self):
+            return Calib()
+
+        def close(self):
+            calls.append("close")
+
+    dai = types.SimpleNamespace(Device=Device, Pipeline=Pipeline, node=types.SimpleNamespace(Camera=CameraNode),
+                                CameraBoardSocket=types.SimpleNamespace(CAM_A="CAM_A"),
+                                ImgFrame=types.SimpleNamespace(Type=types.SimpleNamespace(BGR888i="BGR888i")))
+    monkeypatch.setitem(sys.modules, "depthai", dai)
+    with pytest.raises(SourceError, match="no DepthAI device 'CCC'; attached: AAA, BBB"):
+        open_source("depthai:CCC")
+    with open_source("depthai:BBB") as src:
+        assert src.camera.fx == 800.0 and src.camera.dist.size == 14 and src.camera.size == (1280, 720)
+        with pytest.warns(SourceWarning, match="no frame for 5 s after 3 frames"):
+            frames = list(src)
+    assert ("open", "BBB") in calls and ("output", (1280, 720), "BGR888i", 30.0) in calls
+    assert ("intrinsics", "CAM_A", 1280, 720) in calls and calls[-2:] == ["stop", "close"]
+    assert [f.index for f in frames] == [0, 1, 3]  # the gap shows the dropped frame
+    np.testing.assert_allclose([f.t for f in frames], [0, 1 / 30, 3 / 30], atol=2e-6)  # timedelta: 1 us

@@ -23,6 +23,9 @@ number has gone through (the printer's own debug-command interface: line
 noise is `resend_ratio <percent>`, and `trigger_fatal_error_marlin`,
 `drop_connection`, `mintemp_error`, `reset`, ...).
 
+Printrun's line-number reset `N-1 M110 N-1` is handled as Marlin does (the
+VirtualPrinter's parser would crash on the minus sign).
+
 `corrupt_every=n` is line noise on the wire: the bridge changes one byte of
 every n-th numbered host line, which the printer finds by its checksum.
 
@@ -48,6 +51,7 @@ from octoprint.plugins.virtual_printer import VirtualPrinterPlugin
 from octoprint.plugins.virtual_printer import virtual as _virtual
 
 _LINE_NUMBER = re.compile(rb"^N(-?\d+)")
+_NEGATIVE_M110 = re.compile(rb"^N-1 M110\b")
 
 
 class _Settings:
@@ -106,6 +110,19 @@ class RecordingVirtualPrinter(_virtual.VirtualPrinter):
         self._marlin_resend = marlin_resend
         self._current_line = 0
         super().__init__(*args, **kwargs)
+
+    def write(self, data):
+        # Marlin takes `N-1 M110 N-1` (Printrun's line-number reset: the next
+        # line is N0); the VirtualPrinter's line-number regex has no minus sign
+        # and its command thread dies on it. Do what Marlin does. Hosts send it
+        # while nothing else is in flight.
+        if _NEGATIVE_M110.match(bytes(data)):
+            with self._incoming_lock:
+                self.lastN = -1
+                self._current_line = -1
+                self._sendOk()
+            return len(data)
+        return super().write(data)
 
     # `current_line` drives the checksum-error resend request (see module doc).
     @property

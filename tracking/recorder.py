@@ -142,9 +142,13 @@ def record(source, folder: str | Path, anchors: list | None = None, seconds: flo
     """Record frames from `source` (a tracking.sources Source) into `folder` until it ends,
     `seconds` of frame time or `max_frames` have passed, or Ctrl-C (which finishes the file cleanly).
 
+    `anchors` (session.json blocks or AnchorSpecs) defaults to the source's own session
+    (when it is a recording), else DEFAULT_ANCHORS.
     Timestamps are the source's own (capture times for cameras). Dropped frames
     are counted from gaps in the source's frame indices. Returns the written Session.
     """
+    if anchors is None and getattr(source, "session", None) is not None:
+        anchors = source.session.anchors  # re-recording a recording keeps its anchors
     info = dict(getattr(source, "info", {}) or {})
     info.setdefault("kind", getattr(source, "kind", "file"))
     fps = float(getattr(source, "fps", 0) or 30.0)

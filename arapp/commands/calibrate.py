@@ -1,11 +1,76 @@
-"""`arapp calibrate`: not yet implemented."""
+"""`arapp calibrate`: camera intrinsics from views of a ChArUco board or a chessboard."""
 
-HELP = "(not yet implemented)"
+HELP = "calibrate a camera from ChArUco or chessboard views (a source or a folder of images) into camera.yaml"
 
 
 def add_arguments(parser):
-    pass
+    src = parser.add_mutually_exclusive_group(required=True)
+    src.add_argument("--source", help="camera or video to read views from (v4l2:0, depthai, a video file, a recording)")
+    src.add_argument("--images", help="folder of still images of the board (png, jpg, bmp, tif)")
+    parser.add_argument("--board", choices=["charuco", "chessboard"], default="charuco", help="board kind (default charuco)")
+    parser.add_argument("--squares-x", type=int, default=7, help="squares along x (default 7)")
+    parser.add_argument("--squares-y", type=int, default=5, help="squares along y (default 5)")
+    parser.add_argument("--square-length", type=float, default=0.03, help="square side in metres (default 0.03)")
+    parser.add_argument("--marker-length", type=float, default=0.022, help="ChArUco marker side in metres (default 0.022)")
+    parser.add_argument("--dictionary", default="DICT_5X5_100", help="ChArUco dictionary (default DICT_5X5_100)")
+    parser.add_argument("--max-views", type=int, default=40, help="stop collecting after this many kept views (default 40)")
+    parser.add_argument("--min-views", type=int, default=8, help="fewest views to solve with (default 8)")
+    parser.add_argument("--min-sharpness", type=float, default=30.0,
+                        help="Laplacian-variance floor; blurrier views are rejected (default 30)")
+    parser.add_argument("--every", type=int, default=5, help="with --source, look at every Nth frame (default 5)")
+    parser.add_argument("-o", "--output", required=True, help="calibration YAML to write (OpenCV FileStorage)")
 
 
-def run(args):
-    raise RuntimeError("'arapp calibrate' is not implemented yet")
+def run(args) -> int:
+    from pathlib import Path
+
+    import cv2
+
+    from tracking.calibration import BoardSpec, ViewCollector, solve
+    from tracking.errors import CalibrationError
+
+    board = BoardSpec(args.board, args.squares_x, args.squares_y, args.square_length,
+                      args.marker_length if args.board == "charuco" else None, args.dictionary)
+    col = ViewCollector(board, min_sharpness=args.min_sharpness)
+    names = []
+
+    def consider(image, name):
+        verdict = col.add(image, name)
+        if verdict == "kept":
+            names.append(name)
+        print(f"{name}: {verdict} ({len(col.views)} kept, coverage {col.coverage * 100:.0f} %)")
+
+    if args.images:
+        folder = Path(args.images)
+        if not folder.is_dir():
+            raise CalibrationError(f"--images {folder}: not a folder")
+        files = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"))
+        if not files:
+            raise CalibrationError(f"--images {folder}: no png/jpg/bmp/tif images in it")
+        for p in files:
+            img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+            if img is None:
+                print(f"{p.name}: unreadable, skipped")
+                continue
+            consider(img, p.name)
+            if len(col.views) >= args.max_views:
+                break
+    else:
+        from tracking.sources import open_source
+
+        with open_source(args.source) as source:
+            for frame in source:
+                if frame.index % max(args.every, 1):
+                    continue
+                consider(frame.image, f"frame {frame.index}")
+                if len(col.views) >= args.max_views:
+                    break
+    print(f"rejected: {col.rejected}")
+    res = solve(col.views, col.width, col.height, col.coverage, min_views=args.min_views)
+    print(res.report(names))
+    if col.coverage < 0.5:
+        print(f"warning: the board covered only {col.coverage * 100:.0f} % of the image; views near the edges and "
+              "corners give better distortion estimates")
+    res.camera.save_yaml(args.output, {"rms_px": res.rms, "views": len(res.used)})
+    print(f"wrote {args.output}")
+    return 0

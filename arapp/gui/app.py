@@ -99,6 +99,10 @@ def run_gui(source: str | None = None, model: str | None = None, frames: int | N
     from arapp.gui.main_window import MainWindow
 
     window = MainWindow(settings=settings)
+    if window.engine_kind == "process" and not source:
+        from arapp.gui.remote import warm_up
+
+        warm_up()
     window.show()
     if model:
         window.open_model(model)

@@ -8,7 +8,7 @@ move small objects around and paint.
 from __future__ import annotations
 
 import json
-import time
+import os
 from collections import deque
 from pathlib import Path
 
@@ -68,6 +68,12 @@ class MainWindow(QMainWindow):
         self.edits: dict = {}  # (surface, i, j) -> ((x, y, z), weight)
         self.mesh_lines = None  # (mesh, lines) of `model`, tessellated in a worker
         self.errors: list[tuple[str, str]] = []
+        # where capture, tracking and rendering run: "process" (a child process, the default: the UI never
+        # waits for the pipeline's interpreter lock) or "threads" (worker threads in this process)
+        self.engine_kind = os.environ.get("ARAPP_GUI_ENGINE", "process")
+        self.full_frames = False  # also hand over full-size composited and raw frames (for checks)
+        self.model_gen = 0
+        self.recording_folder = None
         self.error_sink = None  # callable(title, message) replacing dialogs (screenshot mode)
         self._open_boxes: dict[tuple[str, str], QMessageBox] = {}
         self.last_shown = None
@@ -127,7 +133,8 @@ class MainWindow(QMainWindow):
         geometry = self.settings.value("geometry")
         if geometry is not None:
             self.restoreGeometry(geometry)
-        self._edit_task = LatestTask(self._retessellate, self._edit_done, self._edit_failed, name="arapp-edit", owner=self)
+        self._edit_task = LatestTask(self._retessellate, self._edit_done, self._edit_failed, name="arapp-edit",
+                                     owner=self)
         self._status_timer = QTimer(self)
         self._status_timer.setInterval(250)
         self._status_timer.timeout.connect(self._refresh_status)
@@ -231,9 +238,17 @@ class MainWindow(QMainWindow):
             anchors = parse_anchors(DEFAULT_ANCHORS)
         self.source_spec = spec
         name = sourcespec.display_name(spec)
-        engine = Engine(lambda: sourcespec.open_spec(spec), self._make_pipeline, name=name,
-                        default_anchors=anchors, speed=self.replay.speed.currentData(),
-                        loop=self.replay.loop.isChecked(), parent=self)
+        if self.engine_kind == "threads":
+            engine = Engine(lambda: sourcespec.open_spec(spec), self._make_pipeline, name=name,
+                            default_anchors=anchors, speed=self.replay.speed.currentData(),
+                            loop=self.replay.loop.isChecked(), parent=self)
+        else:
+            from arapp.gui.remote import RemoteEngine
+
+            engine = RemoteEngine(spec, name=name, anchors_json=[a.to_dict() for a in anchors],
+                                  speed=self.replay.speed.currentData(), loop=self.replay.loop.isChecked(),
+                                  full_frames=self.full_frames, parent=self)
+        engine.recorded.connect(self._recorded)
         engine.opened.connect(self._source_opened)
         engine.frame_ready.connect(self._frame_ready)
         engine.error.connect(self.show_error)
@@ -243,11 +258,11 @@ class MainWindow(QMainWindow):
         engine.set_display_size(int(self.view.width() * r), int(self.view.height() * r))
         self._engine_frames = 0
         self.latency_ms = 0.0
-        self._push_model_state()
         self.status_source.setText(f"opening {name}...")
         self.view.message = f"Opening {name}..."
         self.view.set_image(None)
         engine.start()
+        self._push_model_state()
         self.replay.set_playing(True)
         self._remember("recent_sources", spec)
 
@@ -388,7 +403,7 @@ class MainWindow(QMainWindow):
 
     def reset_tracking(self) -> None:
         if self.engine is not None:
-            self.engine.submit(lambda p: p.reset())
+            self.engine.reset()
             self.statusBar().showMessage("Tracking reset", 2000)
 
     def toggle_fullscreen(self) -> None:
@@ -404,23 +419,19 @@ class MainWindow(QMainWindow):
         if self.engine is None or self.source_info is None or self.source_info.seekable:
             self.replay.record_button.setChecked(False)
             return
-        player = self.engine.player
         if on:
             folder = recording.new_recording_folder()
-            try:
-                player.recorder = recording.start(folder, self.source_info, self.engine.player.source)
-            except (ValueError, OSError, RuntimeError) as exc:
-                self.replay.record_button.setChecked(False)
-                self.show_error("Cannot record", str(exc))
-                return
+            self.recording_folder = folder
+            self.engine.record_start(folder)
             self.statusBar().showMessage(f"Recording to {folder}", 5000)
             self.replay.record_button.setText("Stop recording")
         else:
-            rec, player.recorder = player.recorder, None
             self.replay.record_button.setText("Record")
-            if rec is not None:
-                Task(rec.close, done=lambda _r, f=rec.folder: self.statusBar().showMessage(f"Saved {f}", 8000),
-                     failed=lambda e: self.show_error("Recording failed", str(e)), owner=self).start()
+            self.engine.record_stop()
+
+    def _recorded(self, folder: str) -> None:
+        self.statusBar().showMessage(f"Saved the recording {folder}", 8000)
+        self._remember("recent_sources", folder)
 
     # -- anchors -------------------------------------------------------------------------
     def edit_anchors(self) -> None:
@@ -480,24 +491,20 @@ class MainWindow(QMainWindow):
     def _push_model_state(self) -> None:
         if self.engine is None:
             return
-        mode, placement, model = self.mode, self.placement, self.model
-
-        def apply(p):
-            p.set_mode(mode)
-            p.set_model(model, placement)  # the model's mesh was tessellated (and cached) by the loader
-
-        self.engine.submit(apply)
+        self.model_gen += 1
+        self.engine.set_model(self.model_gen, self.model_path if self.model is not None else None,
+                              self.edits, self.placement, self.mode, model=self.model)
 
     def set_placement(self, placement: dict) -> None:
         self.placement = dict(placement)
         if self.engine is not None and self.model is not None:
-            self.engine.submit(lambda p, pl=dict(placement): p.set_placement(pl))
+            self.engine.set_placement(dict(placement))
 
     def set_mode(self, mode: str) -> None:
         self.mode = mode
         self.settings.setValue("mode", mode)
         if self.engine is not None:
-            self.engine.submit(lambda p, m=mode: p.set_mode(m))
+            self.engine.set_mode(mode)
 
     def edit_control_point(self, k: int, i: int, j: int, xyz: tuple, weight: float) -> None:
         """Replace surface k's control point (i, j) and its weight; re-tessellate in a worker (newest edit wins)."""
@@ -521,9 +528,8 @@ class MainWindow(QMainWindow):
         self.model = model
         self.mesh_lines = (mesh, lines)
         self.model_panel.set_surfaces(model.surfaces)
-        if self.engine is not None:
-            # the edited model's bounds may differ: place it anew (its mesh is cached, so this is cheap)
-            self.engine.submit(lambda p, m=model, pl=self.placement: p.set_model(m, pl))
+        # the edited model's bounds may differ: place it anew (the engine re-tessellates off the UI thread)
+        self._push_model_state()
         self.model_ready.emit(model)
 
     def _edit_failed(self, exc: BaseException) -> None:
@@ -598,7 +604,7 @@ class MainWindow(QMainWindow):
         self.settings.setValue("geometry", self.saveGeometry())
         self.settings.sync()
         if self.engine is not None:
-            if self.engine.player.recorder is not None:
+            if self.replay.record_button.isChecked():
                 self.toggle_recording(False)
             self.engine.stop(wait=2.0)
         for e in getattr(self, "_old_engines", []):

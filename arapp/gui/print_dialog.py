@@ -8,7 +8,7 @@ import time
 from collections import deque
 from pathlib import Path
 
-from PySide6.QtCore import QPointF, Qt, QTimer, Signal
+from PySide6.QtCore import QPointF, Qt, Signal
 from PySide6.QtGui import QColor, QPainter, QPen, QPolygonF
 from PySide6.QtWidgets import (
     QComboBox,
@@ -395,7 +395,8 @@ class PrintDialog(QDialog):
             try:
                 baud = int(self.baud.currentText())
             except ValueError:
-                self._fail("Cannot print", ValueError(f"baud rate must be a whole number, got {self.baud.currentText()!r}"))
+                text = self.baud.currentText()
+                self._fail("Cannot print", ValueError(f"baud rate must be a whole number, got {text!r}"))
                 return
             target = printlink.SerialTarget(self.port.currentText().strip(), baud)
         try:

@@ -6,7 +6,6 @@ A job runs in its own thread and reports `PrintEvent`s through a callback
 
 from __future__ import annotations
 
-import importlib
 import threading
 import time
 from dataclasses import dataclass, field
@@ -47,23 +46,6 @@ def serial_ports() -> list[str]:
     return sorted(ports, key=lambda d: (not ("USB" in d or "ACM" in d), d))
 
 
-def eta_text(fraction: float, elapsed_s: float) -> str:
-    """'ETA 12 min' from the fraction done and the time spent so far."""
-    if fraction <= 0.001:
-        return "ETA -"
-    left = elapsed_s * (1 - fraction) / fraction
-    return f"ETA {left / 60:.0f} min" if left >= 60 else f"ETA {left:.0f} s"
-
-
-def _link_module(names: tuple[str, ...]):
-    for name in names:
-        try:
-            return importlib.import_module(name)
-        except ModuleNotFoundError:
-            continue
-    return None
-
-
 def start_job(target, gcode: str, profile, callback) -> "PrintJob":
     """Start printing `gcode` on `target`; callback(PrintEvent) from the job's thread. Raises ValueError/OSError/
     RuntimeError with the link's own message when the printer cannot be reached."""
@@ -101,36 +83,48 @@ class PrintJob:
 
     def _run(self) -> None:
         try:
-            if isinstance(self.target, OctoPrintTarget):
-                self._run_octoprint()
-            else:
-                self._run_serial()
+            self._run_link()
         except Exception as exc:  # noqa: BLE001 - the printer's message goes to the dialog
             self.callback(PrintEvent(text="Print stopped", finished=True, error=str(exc) or type(exc).__name__))
             return
         self.callback(PrintEvent(fraction=None if self._cancel.is_set() else 1.0,
                                  text="Cancelled" if self._cancel.is_set() else "Done", finished=True))
 
-    def _progress(self, fraction, layer=None, temperatures=None, text=None) -> None:
-        fraction = None if fraction is None else float(fraction)
-        parts = []
-        if fraction is not None:
-            parts.append(f"{100 * fraction:.1f} %")
+    def _on_progress(self, pr) -> None:
+        """A link's Progress -> PrintEvent (temperatures T/B renamed hotend/bed)."""
+        temps = {}
+        for key, name in (("T", "hotend"), ("B", "bed")):
+            if key in pr.temperatures:
+                actual, target = pr.temperatures[key]
+                temps[name] = (actual, target if target is not None else actual)
+        fraction = max(0.0, min(1.0, pr.percent / 100.0))
+        layer = pr.layer + 1 if pr.layer >= 0 else None
+        parts = [f"{pr.percent:.1f} %"]
         if layer is not None:
-            parts.append(f"layer {layer}")
-        if fraction is not None:
-            parts.append(eta_text(fraction, time.monotonic() - self.started))
-        self.callback(PrintEvent(fraction=fraction, layer=layer, text=text or "  ".join(parts),
-                                 temperatures=temperatures or {}))
+            parts.append(f"layer {layer}" + (f"/{pr.layer_count}" if pr.layer_count else ""))
+        parts.append(f"line {pr.lines_done}/{pr.lines_total}")
+        if pr.eta_s is not None:
+            parts.append(f"ETA {pr.eta_s / 60:.0f} min" if pr.eta_s >= 60 else f"ETA {pr.eta_s:.0f} s")
+        if pr.message:
+            parts.append(pr.message)
+        self.callback(PrintEvent(fraction=fraction, layer=layer, text="  ".join(parts), temperatures=temps))
 
-    def _run_serial(self) -> None:
-        mod = _link_module(("arapp.printing.link.serial_host", "arapp.printing.link.host", "arapp.printing.link.serial"))
-        if mod is None:
-            raise RuntimeError("the serial printer link (arapp.printing.link) is not available in this build")
-        raise RuntimeError(f"{mod.__name__}: no print entry point known to the GUI")
+    def _make_link(self):
+        from arapp.printing.link import OctoPrintLink, SerialPrinter
 
-    def _run_octoprint(self) -> None:
-        mod = _link_module(("arapp.printing.link.octoprint",))
-        if mod is None:
-            raise RuntimeError("the OctoPrint link (arapp.printing.link.octoprint) is not available in this build")
-        raise RuntimeError(f"{mod.__name__}: no print entry point known to the GUI")
+        bed = getattr(getattr(self.profile, "bed", None), "height", None)
+        if isinstance(self.target, OctoPrintTarget):
+            from arapp.printing.link.octoprint import load_api_key
+
+            return OctoPrintLink(self.target.url, load_api_key(self.target.api_key_file))
+        return SerialPrinter(self.target.port, self.target.baud, bed_height=bed)
+
+    def _run_link(self) -> None:
+        link = self._make_link()
+        self._host = link
+        where = self.target.url if isinstance(self.target, OctoPrintTarget) else self.target.port
+        self.callback(PrintEvent(text=f"Connecting to {where}..."))
+        with link:
+            if self._cancel.is_set():
+                return
+            link.print_gcode(self.gcode.splitlines(), progress=self._on_progress, cancel=self._cancel)

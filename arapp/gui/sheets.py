@@ -1,42 +1,28 @@
-"""Printable marker sheets for the anchors in use (PNG at 300 dpi, true size), drawn by tracking.anchors."""
+"""Printable marker sheets for the anchors in use: one PNG + PDF page per anchor at true scale
+(tracking.printables draws them, as `arapp markers` does)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-import cv2
-import numpy as np
 
-DPI = 300.0
+def sheet_name(index: int, spec) -> str:
+    """File stem for anchor `index`, e.g. anchor0_aruco_board_DICT_4X4_50."""
+    parts = [f"anchor{index}", spec.kind]
+    if spec.dictionary:
+        parts.append(spec.dictionary)
+    if spec.kind == "aruco":
+        parts.append(f"id{spec.id}")
+    return "_".join(parts)
 
 
-def save_sheets(anchors, folder: str | Path) -> list[Path]:
-    """One PNG per anchor in `folder`; anchors are AnchorSpecs or session.json blocks. Returns the paths."""
-    from tracking.anchors.model import build_models
-    from tracking.anchors.render import draw_anchor, plane_layout
+def save_sheets(anchors, folder: str | Path, dpi: float = 300.0, page: str = "A4") -> list[Path]:
+    """Write the sheets of `anchors` (AnchorSpecs or session.json blocks) into `folder`; return the files."""
+    from tracking.printables import write_sheet
     from tracking.session import AnchorSpec, parse_anchors
 
     specs = anchors if anchors and isinstance(anchors[0], AnchorSpec) else parse_anchors(list(anchors))
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    px_per_m = DPI / 0.0254
-    out = []
-    for k, model in enumerate(build_models(specs)):
-        paper, _, _ = plane_layout(model)
-        lo, hi = paper.min(axis=0), paper.max(axis=0)
-        w, h = int(np.ceil((hi[0] - lo[0]) * px_per_m)), int(np.ceil((hi[1] - lo[1]) * px_per_m))
-        if model.spec.kind in ("aruco_board", "charuco"):
-            # OpenCV's board frame: x right, y down the board as printed
-            pixel_from_plane = np.array([[px_per_m, 0, -lo[0] * px_per_m], [0, px_per_m, -lo[1] * px_per_m], [0, 0, 1]])
-        else:
-            # marker frame: x right, y up as printed
-            pixel_from_plane = np.array([[px_per_m, 0, -lo[0] * px_per_m], [0, -px_per_m, hi[1] * px_per_m], [0, 0, 1]])
-        canvas = np.full((h, w), 255, np.uint8)
-        draw_anchor(canvas, model, pixel_from_plane)
-        spec = model.spec
-        name = f"anchor{k}_{spec.kind}" + (f"_{spec.id}" if spec.id is not None else "") + ".png"
-        path = folder / name
-        if not cv2.imwrite(str(path), canvas):
-            raise OSError(f"cannot write {path}")
-        out.append(path)
+    out: list[Path] = []
+    for k, spec in enumerate(specs):
+        out += write_sheet(spec, folder, sheet_name(k, spec), dpi, page)
     return out

@@ -509,6 +509,7 @@ class Engine(QObject):
     frame_ready = Signal()
     error = Signal(str, str)
     ended = Signal()
+    recorded = Signal(str)
 
     def __init__(self, opener: Callable[[], Any], pipeline_factory: Callable[[Any, SourceInfo], Any], *,
                  name: str = "", default_anchors: list | None = None, speed: float = 1.0, loop: bool = False,
@@ -530,6 +531,7 @@ class Engine(QObject):
         self._autoplay = playing
         self._first_ready = False
         self.display_size: tuple[int, int] | None = None
+        self.model_state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0}
         self.player = Player(opener, self.captured, speed=speed, loop=loop, playing=False, on_demand=on_demand,
                              on_open=self._on_open, on_error=self.error.emit, on_end=self.ended.emit)
         self.player._steps = 1
@@ -593,6 +595,8 @@ class Engine(QObject):
         shown = self.shown.take()
         if shown is not None:
             shown.dropped_paint = self.shown.dropped
+            if isinstance(getattr(shown.result, "extra", None), dict):
+                shown.result.extra.update(self.model_state)
         return shown
 
     def set_display_size(self, width: int, height: int) -> None:
@@ -610,6 +614,59 @@ class Engine(QObject):
                 return
             processor = self.processor
         processor.submit(fn)
+
+    # the same commands as remote.RemoteEngine ------------------------------------------------
+    def set_model(self, gen: int, path: str | None, edits: dict, placement: dict | None, mode: str,
+                  model=None) -> None:
+        """Show `model` (already loaded and edited by the caller) as placed; `gen` numbers the request."""
+
+        def apply(p):
+            p.set_mode(mode)
+            p.set_model(model, placement)
+            self.model_state.update(mode=mode, model_gen=gen,
+                                    mesh_faces=0 if p.mesh is None else int(len(p.mesh.faces)))
+
+        self.submit(apply)
+
+    def set_placement(self, placement: dict) -> None:
+        self.submit(lambda p, pl=dict(placement): p.set_placement(pl))
+
+    def set_mode(self, mode: str) -> None:
+        def apply(p):
+            p.set_mode(mode)
+            self.model_state["mode"] = mode
+
+        self.submit(apply)
+
+    def reset(self) -> None:
+        def apply(p):
+            p.reset()
+            self.model_state["resets"] += 1
+
+        self.submit(apply)
+
+    def record_start(self, folder) -> None:
+        from arapp.gui import recording
+
+        try:
+            self.player.recorder = recording.start(folder, self.info, self.player.source)
+        except (ValueError, OSError, RuntimeError) as exc:
+            self.error.emit("Cannot record", str(exc))
+
+    def record_stop(self) -> None:
+        rec, self.player.recorder = self.player.recorder, None
+        if rec is None:
+            return
+
+        def finish():
+            try:
+                rec.close()
+            except Exception as exc:  # noqa: BLE001
+                self.error.emit("Recording failed", str(exc))
+                return
+            self.recorded.emit(str(rec.folder))
+
+        threading.Thread(target=finish, name="arapp-record-close", daemon=True).start()
 
     # replay controls, forwarded to the capture thread
     def play(self) -> None:

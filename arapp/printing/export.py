@@ -195,11 +195,12 @@ def fit_on_bed(mesh: trimesh.Trimesh, profile, margin: float = 0.0, scale_to_fit
 
 
 def scale_to_size(mesh: trimesh.Trimesh, size_mm: float) -> trimesh.Trimesh:
-    """The mesh scaled uniformly so its larger horizontal (x, y) extent is `size_mm`."""
+    """The mesh scaled uniformly so its largest extent is `size_mm` (as a model's placement size)."""
     if not size_mm > 0:
         raise ValueError(f"--size must be a positive number of millimetres, got {size_mm}")
-    ext = mesh.extents
-    ref = max(ext[0], ext[1]) if max(ext[0], ext[1]) > 1e-12 else ext[2]
+    ref = float(np.max(mesh.extents))
+    if not ref > 0:
+        raise ValueError("the mesh has no extent; it cannot be scaled to a size")
     out = mesh.copy()
     out.apply_scale(size_mm / ref)
     return out

@@ -19,29 +19,12 @@ from .slicer.planner import KIND_TYPES, LayerToolpaths
 # ---------------------------------------------------------------- writer
 
 
-def move_time(lengths: np.ndarray, speed: float, accel: float) -> float:
-    """Seconds to run moves of these lengths (mm) at `speed` mm/s, each from and to rest with
-    acceleration `accel` mm/s² (trapezoid or, for short moves, triangle profile)."""
-    lengths = np.asarray(lengths, dtype=float)
-    if lengths.size == 0:
-        return 0.0
-    full = lengths >= speed * speed / accel
-    t = np.where(full, lengths / speed + speed / accel, 2.0 * np.sqrt(np.maximum(lengths, 0.0) / accel))
-    return float(t.sum())
-
-
-def polyline_time(points: np.ndarray, speed: float, accel: float, corner_deg: float = 30.0) -> float:
-    """Seconds to extrude along a polyline (mm) at `speed`: the machine slows to a stop only at
-    corners sharper than `corner_deg` (a coarse stand-in for Marlin's junction deviation)."""
-    d = np.diff(points, axis=0)
-    seg = np.linalg.norm(d, axis=1)
-    if len(seg) == 0:
-        return 0.0
-    u = d / np.maximum(seg, 1e-12)[:, None]
-    cos_turn = (u[:-1] * u[1:]).sum(axis=1)
-    stops = np.flatnonzero(cos_turn < np.cos(np.radians(corner_deg))) + 1
-    pieces = np.add.reduceat(seg, np.concatenate([[0], stops])) if len(stops) else np.array([seg.sum()])
-    return move_time(pieces, speed, accel)
+def _move_time1(length: float, speed: float, accel: float) -> float:
+    """Seconds for one move of `length` mm at `speed` mm/s from and to rest with acceleration `accel` mm/s²
+    (trapezoid profile, or a triangle when the move is too short to reach the speed)."""
+    if length >= speed * speed / accel:
+        return length / speed + speed / accel
+    return 2.0 * math.sqrt(max(length, 0.0) / accel)
 
 
 def _layer_arrays(layer: LayerToolpaths, speeds: dict, area: float, accel: float) -> dict:
@@ -138,14 +121,14 @@ def write_gcode(layers: list[LayerToolpaths], settings, profile, header: list[st
         hop = long_travel and settings.z_hop > 0 and pos is not None
         if hop:
             emit(f"G1 Z{z + settings.z_hop:.3f} F{travel_f:.0f}")
-            time_s += move_time([settings.z_hop], min(speeds["travel"], 10.0), accel)
+            time_s += _move_time1(settings.z_hop, min(speeds["travel"], 10.0), accel)
         if dist > 1e-9:
             emit(f"G0 X{xy[0]:.3f} Y{xy[1]:.3f} F{travel_f:.0f}")
             if math.isfinite(dist):
-                time_s += move_time([dist], speeds["travel"], accel)
+                time_s += _move_time1(dist, speeds["travel"], accel)
         if hop:
             emit(f"G1 Z{z:.3f} F{travel_f:.0f}")
-            time_s += move_time([settings.z_hop], min(speeds["travel"], 10.0), accel)
+            time_s += _move_time1(settings.z_hop, min(speeds["travel"], 10.0), accel)
         if retracted:
             emit(f"G1 E{e:.5f} F{retract_f:.0f}")
             time_s += settings.retract_length / settings.retract_speed
@@ -163,7 +146,7 @@ def write_gcode(layers: list[LayerToolpaths], settings, profile, header: list[st
             emit(f"G1 E{e - settings.retract_length:.5f} F{retract_f:.0f}")
             retracted = True
         emit(f"G1 Z{layer.z:.3f} F{min(travel_f, 600.0):.0f}")
-        time_s += move_time([abs(layer.z - z_now)], 10.0, accel)
+        time_s += _move_time1(abs(layer.z - z_now), 10.0, accel)
         z_now = layer.z
         # E restarts from 0 each layer; while retracted the filament sits retract_length below that
         emit(f"G92 E{-settings.retract_length:.5f}" if retracted else "G92 E0")

@@ -27,7 +27,6 @@
 See renderer.py for the pipeline, modes.py for display modes and LineSet, gl.py for the GL platform.
 """
 
-from arapp.render.composite import draw_status
 from arapp.render.gl import RendererError, select_platform
 from arapp.render.modes import MODES, LineSet
 
@@ -41,4 +40,4 @@ def __getattr__(name):
     raise AttributeError(name)
 
 
-__all__ = ["OverlayRenderer", "LineSet", "RendererError", "MODES", "select_platform", "draw_status"]
+__all__ = ["OverlayRenderer", "LineSet", "RendererError", "MODES", "select_platform"]

@@ -51,21 +51,3 @@ def warp_crop(premul_rgba: np.ndarray, src_xy: tuple[np.ndarray, np.ndarray], sr
     my = src_xy[1] - np.float32(src_origin[1])
     return cv2.remap(premul_rgba, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0, 0))
 
-
-def draw_status(frame_bgr: np.ndarray, text: str, corner: str = "top-left", scale: float = 0.5) -> np.ndarray:
-    """Write a one-line status (e.g. "tracking  29.8 fps") on a dark translucent box in a corner, in place.
-
-    corner: "top-left", "top-right", "bottom-left" or "bottom-right". Returns the frame.
-    """
-    if corner not in ("top-left", "top-right", "bottom-left", "bottom-right"):
-        raise ValueError(f"corner must be top-left, top-right, bottom-left or bottom-right, got {corner!r}")
-    font, thick, margin = cv2.FONT_HERSHEY_SIMPLEX, 1, 6
-    (tw, th), base = cv2.getTextSize(text, font, scale, thick)
-    h, w = frame_bgr.shape[:2]
-    bw, bh = min(tw + 2 * margin, w), min(th + base + 2 * margin, h)
-    x0 = 0 if corner.endswith("left") else w - bw
-    y0 = 0 if corner.startswith("top") else h - bh
-    roi = frame_bgr[y0:y0 + bh, x0:x0 + bw]
-    roi[...] = (roi.astype(np.uint16) * 2 // 5).astype(np.uint8)  # darken to 40% so any background reads
-    cv2.putText(frame_bgr, text, (x0 + margin, y0 + margin + th), font, scale, (255, 255, 255), thick, cv2.LINE_AA)
-    return frame_bgr

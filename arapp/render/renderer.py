@@ -165,6 +165,10 @@ class OverlayRenderer:
             composite.over_bgr(out, crop, x0, y0)
         return out
 
+    def draw_lines(self, frame_bgr: np.ndarray, line_sets, camera_from_model, inplace: bool = False) -> np.ndarray:
+        """`frame_bgr` with only line sets drawn (e.g. sliced toolpaths in bed millimetres): draw(frame, None, ...)."""
+        return self.draw(frame_bgr, None, camera_from_model, line_sets=line_sets, inplace=inplace)
+
     def close(self) -> None:
         """Free the GPU objects and the GL context."""
         if getattr(self, "_closed", True):
@@ -282,9 +286,15 @@ class OverlayRenderer:
             entry[1].delete()
         g = GpuLines(self.GL, ls.segments())
         self._linesets[key] = (weakref.ref(ls), g)
-        while len(self._linesets) > _LINESET_CACHE_SIZE:
-            self._linesets.popitem(last=False)[1][1].delete()
         return g
+
+    def _trim_linesets(self, in_use: set) -> None:
+        """Keep at most _LINESET_CACHE_SIZE line sets on the GPU, never evicting those drawn this frame."""
+        for key in list(self._linesets):
+            if len(self._linesets) <= _LINESET_CACHE_SIZE:
+                break
+            if key not in in_use:
+                self._linesets.pop(key)[1].delete()
 
     def _drop_dead(self) -> None:
         """Free GPU copies of meshes and line sets that have been garbage collected."""
@@ -379,6 +389,7 @@ class OverlayRenderer:
             (ls, self._gpu_lineset(ls, persistent))
             for ls, persistent in line_list
         ]
+        self._trim_linesets({id(ls) for ls, persistent in line_list if persistent})
         if gmesh is not None and mode == "wireframe":
             edge_set = modes.LineSet([], modes.WIRE_COLOR if color is None else rgba[:3] + (1.0,), 1.0, 0.0)
             line_items.insert(0, (edge_set, gmesh.edge_lines()))

@@ -161,8 +161,15 @@ class QRTracking:
         if self.prev is None or self.prev.shape != gray.shape:
             return None
         ok = np.isfinite(prev_pts[:, 0])
-        p0 = prev_pts[ok].astype(np.float32).reshape(-1, 1, 2)
-        p1, st, _ = cv2.calcOpticalFlowPyrLK(self.prev, gray, p0, None, **_LK)
+        # optical flow on a crop around the code only (pyramids of a whole 720p frame cost milliseconds)
+        h, w = gray.shape
+        lo, hi = prev_pts[ok].min(axis=0), prev_pts[ok].max(axis=0)
+        pad = 0.5 * float((hi - lo).max()) + 40.0
+        x0, y0 = np.maximum(np.floor(lo - pad), 0).astype(int)
+        x1, y1 = np.minimum(np.ceil(hi + pad), [w, h]).astype(int)
+        p0 = (prev_pts[ok] - [x0, y0]).astype(np.float32).reshape(-1, 1, 2)
+        p1, st, _ = cv2.calcOpticalFlowPyrLK(self.prev[y0:y1, x0:x1], gray[y0:y1, x0:x1], p0, None, **_LK)
+        p1 = p1 + np.float32([x0, y0])
         st = st.ravel().astype(bool)
         if st.sum() < 8:
             return None

@@ -79,6 +79,8 @@ class AnchorTracker:
         self.roi = roi
         self.full_every = max(int(full_every), 1)
         self.track_markers = bool(track_markers)
+        self.track_max_rms = 1.0  # px: a tracked (not detected) solution worse than this is re-detected
+        self._tracked_only = False
         self.outlier_px = float(outlier_px)
         self.branch_decay = float(branch_decay)
         self.branch_switch = float(branch_switch)
@@ -132,10 +134,17 @@ class AnchorTracker:
                              f"{self.camera.width}x{self.camera.height}; use Camera.scaled() for resized images")
         pred = self.filter.predict(t)
         pred_cfw = None if pred is None else invert(pred)
-        obs = self._detect_aruco(gray, pred_cfw)
-        if self.qr.models:
-            obs += self.qr.process(gray, pred_cfw, self._expected_qr(pred_cfw))
+        self._tracked_only = False
+        aruco_obs = self._detect_aruco(gray, pred_cfw)
+        qr_obs = self.qr.process(gray, pred_cfw, self._expected_qr(pred_cfw)) if self.qr.models else []
+        obs = aruco_obs + qr_obs
         sol = solve_pose(obs, self.world_from_anchor, self.camera, pred_cfw, outlier_px=self.outlier_px)
+        if self._tracked_only and (sol is None or sol.rms > self.track_max_rms
+                                   or len(sol.world) < 0.8 * sum(len(o.obj) for o in obs)):
+            # markers re-found by tracking did not agree well: detect them properly this frame
+            self.tracked_keys = set()
+            obs = self._detect_aruco(gray, pred_cfw) + qr_obs
+            sol = solve_pose(obs, self.world_from_anchor, self.camera, pred_cfw, outlier_px=self.outlier_px)
         if sol is not None and pred_cfw is not None and self._other_branch_wins(obs, sol):
             # the image has favoured the other IPPE branch for a while: the branch kept so far was the wrong
             # guess (e.g. the first frame's). Switch, and restart the filter so it does not smooth the jump.
@@ -147,9 +156,14 @@ class AnchorTracker:
         if sol is not None:
             raw = sol.world_from_camera
             depth = float(np.median((sol.world @ sol.camera_from_world[:3, :3].T + sol.camera_from_world[:3, 3])[:, 2]))
-            # the measurement's noise in radians: pixel error over the points' extent, fewer with more points
-            extent = float(np.linalg.norm(np.ptp(sol.img, axis=0)))
-            sigma = 2.0 * max(sol.rms, 0.1) / max(extent, 1.0) / np.sqrt(max(len(sol.img) / 4.0, 1.0))
+            # The measurement's noise in radians: pixel noise (the residual corrected for the 6 pose
+            # parameters, at least 0.1 px) over the points' extent, times the lever f/extent that makes
+            # out-of-plane tilt and depth of a small target uncertain, fewer with more points.
+            n = len(sol.img)
+            extent = max(float(np.linalg.norm(np.ptp(sol.img, axis=0))), 1.0)
+            px_sigma = max(sol.rms * np.sqrt(2 * n / max(2 * n - 6, 1)), 0.1)
+            lever = np.sqrt(1.0 + (self.camera.fx / extent) ** 2)
+            sigma = 2.0 * px_sigma / extent * lever / np.sqrt(max(n / 4.0, 1.0))
             filt = self.filter.update(raw, t, depth, sigma)
             res.raw_world_from_camera = raw
             res.world_from_camera = filt if self.filter_enabled else raw
@@ -175,9 +189,12 @@ class AnchorTracker:
             # predicted pose puts them (no detector pass at all)
             obs = self.aruco.track(gray, self.tracked_keys, pred_cfw)
             if obs:
+                self._tracked_only = True
                 return obs
         roi = None
-        if self.roi and pred_cfw is not None and self.frame % self.full_every:
+        # a region only when the last frame was tracked: after a loss the markers may be anywhere, and a
+        # failed region search would just add to the full-frame one
+        if self.roi and pred_cfw is not None and self.frame % self.full_every and self.tracked_keys:
             roi = self._aruco_roi(pred_cfw, gray.shape)
         if roi is not None:
             obs = self.aruco.detect(gray, roi)

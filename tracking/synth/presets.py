@@ -37,7 +37,7 @@ PRESETS: dict[str, dict] = {
         "supersample": 2,
     },
     # One marker: a hand covers it (fully from 1.0 s to 3.0 s), then the camera pans away so it is
-    # out of view from about 4.0 s to 5.6 s, and back. For SLAM: the desk texture carries the pose.
+    # out of view from 3.8 s to 5.83 s, and back. For SLAM: the desk texture carries the pose.
     "marker_occluded": {
         "name": "marker_occluded", "seed": 3, "fps": 30, "duration": 7.0,
         "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": MILD_DIST},

@@ -69,11 +69,14 @@ def make_trajectory(spec: dict, duration: float, seed: int = 0, where: str = "tr
       orbit:     azimuth_start, azimuth_end, distance, elevation, elevation_swing
       approach:  azimuth, elevation, distance_start, distance_end
       pan:       azimuth, distance, elevation, pan_deg (half sweep), cycles (back-and-forth sweeps)
+      leave_view: azimuth, distance, elevation, away [dx, dy] (where the view turns to), leave_at,
+                 back_at, ramp (seconds): the anchors leave the view and come back
       keyframes: keys = [{"t", "eye": [x, y, z], "target": [x, y, z], "roll": deg}], spline-interpolated
     Any kind takes `shake`: {"pos_mm", "rot_deg", "freq_hz"} for hand-held tremor.
     """
     if not isinstance(spec, dict) or "kind" not in spec:
-        raise SessionError(f"{where}: must be an object with a kind (static, orbit, approach, pan, keyframes)")
+        raise SessionError(f"{where}: must be an object with a kind (static, orbit, approach, pan, leave_view, "
+                          "keyframes)")
     kind = spec["kind"]
     g = lambda k, d=None: _get(spec, k, d, where)  # noqa: E731
     target0 = np.asarray(spec.get("target", [0.0, 0.0, 0.0]), float)
@@ -104,6 +107,15 @@ def make_trajectory(spec: dict, duration: float, seed: int = 0, where: str = "tr
             ang = half * np.sin(2 * np.pi * cycles * t / duration)
             dist = np.linalg.norm(target0 - eye)
             return look_at(eye, target0 + right * dist * np.tan(ang))
+    elif kind == "leave_view":
+        eye0 = _eye_from_polar(g("azimuth", -90.0), g("distance", 0.45), g("elevation", 60.0)) + target0
+        away = np.array(list(g("away", [0.45, 0.1])) + [0.0], float)
+        t_leave, t_back, ramp = g("leave_at", 1.0), g("back_at", 3.0), g("ramp", 0.6)
+
+        def base(t):
+            # 0 -> 1 over `ramp` seconds from leave_at, back to 0 over `ramp` seconds before back_at
+            w = _smoothstep((t - t_leave) / ramp) * (1.0 - _smoothstep((t - (t_back - ramp)) / ramp))
+            return look_at(eye0 + 0.4 * w * away, target0 + w * away)
     elif kind == "keyframes":
         keys = g("keys")
         if not isinstance(keys, list) or len(keys) < 2:
@@ -125,7 +137,8 @@ def make_trajectory(spec: dict, duration: float, seed: int = 0, where: str = "tr
             tc = float(np.clip(t, ts[0], ts[-1]))
             return look_at(se(tc), st(tc), float(sr(tc)))
     else:
-        raise SessionError(f"{where}.kind: must be static, orbit, approach, pan or keyframes, got {kind!r}")
+        raise SessionError(f"{where}.kind: must be static, orbit, approach, pan, leave_view or keyframes, "
+                          f"got {kind!r}")
 
     shake = spec.get("shake")
     if not shake:

@@ -23,7 +23,8 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-MODEL_FILTER = "Models (*.json *.stl *.obj *.ply *.3mf *.glb);;NURBS models (*.json);;Meshes (*.stl *.obj *.ply *.3mf *.glb)"
+MODEL_FILTER = ("Models (*.json *.stl *.obj *.ply *.3mf *.glb);;NURBS models (*.json);;"
+                "Meshes (*.stl *.obj *.ply *.3mf *.glb)")
 MODES = ("shaded", "wireframe", "isolines", "translucent")
 THUMB = 72
 

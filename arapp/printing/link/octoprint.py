@@ -214,11 +214,14 @@ class OctoPrintLink(PrintLink):
             ours = file_name in (uploaded, name)
             if ours and (low.startswith(("printing", "pausing", "paused", "cancelling", "finishing", "starting"))):
                 started = True
-            fraction = (completion or 0.0) / 100.0 if ours else 0.0
-            state.commands_done = int(round(fraction * state.commands_total))
-            if offsets and ours:
-                i = bisect.bisect_right(offsets, filepos) - 1
-                state.layer = layers[i] if i >= 0 else -1
+            if ours and completion is not None:
+                # After a cancel OctoPrint reports no progress: keep the last known.
+                fraction = completion / 100.0
+                state.commands_done = int(round(fraction * state.commands_total))
+                if offsets:
+                    i = bisect.bisect_right(offsets, filepos) - 1
+                    state.layer = layers[i] if i >= 0 else -1
+            fraction = state.commands_done / state.commands_total if state.commands_total else 0.0
             kind = PAUSED if "paus" in low else CANCELLING if cancelling or "cancel" in low else PRINTING
             if "heat" in low:
                 kind = HEATING

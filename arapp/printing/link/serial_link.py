@@ -34,7 +34,6 @@ from . import protocol as P
 from .base import (
     CANCELLED,
     CANCELLING,
-    CONNECTING,
     DONE,
     HEATING,
     PAUSED,
@@ -82,6 +81,8 @@ class SerialPrinter(PrintLink):
     rx_buffer: unacknowledged bytes allowed in flight.
     timeout: seconds without any reply, with a line unanswered, before it is sent again.
     max_timeouts: consecutive unanswered resends before the link counts as lost.
+    boot_wait: seconds between connection hellos (a board that resets on open
+        needs its bootloader time); connect_timeout: give up after this long.
     job_path: where the job state is saved (on layer changes, on stop, on failure).
     bed_height: mm, caps the nozzle lift of a cancel.
     """
@@ -161,25 +162,53 @@ class SerialPrinter(PrintLink):
         self._reader = threading.Thread(target=self._read_loop, name="arapp-serial-reader", daemon=True)
         self._reader.start()
 
-        # Boards that reset when the port opens print `start`; others say nothing.
-        deadline = time.monotonic() + self.boot_wait
-        while True:
-            ev = self._get_event(deadline)
-            if ev is None:
-                break
-            if isinstance(ev, BaseException):
-                raise LinkLost(f"printer port {self.port} closed while connecting: {ev}")
-            if ev.kind == P.START:
-                break
-        self._next = 0
-        self._top = -1
-        self._confirmed = -1
-        self._history.clear()
-        self._inflight.clear()
-        host = [_Item("M110 N0"), _Item("M115")]
-        self._run(host, progress=None, cancel=None, connecting=True)
+        self._handshake()
+        self._run([_Item("M115")], progress=None, cancel=None, connecting=True)
         if self.capabilities.get("AUTOREPORT_TEMP"):
             self._run([_Item(f"M155 S{max(1, round(self.temp_interval))}")], None, None, connecting=True)
+
+    def _handshake(self) -> None:
+        """Reset line numbers with `N0 M110 N0` until the firmware answers `ok`.
+
+        Boards that reset when the port opens print `start` after their
+        bootloader; others say nothing. The hello is repeated every
+        `boot_wait` seconds (and right after a `start`) until `connect_timeout`.
+        """
+        hello = P.frame(0, "M110 N0")
+        deadline = time.monotonic() + self.connect_timeout
+        sent = 0
+        while True:
+            self._write(hello)
+            sent += 1
+            retry_at = min(deadline, time.monotonic() + self.boot_wait)
+            answer = None
+            while answer is None:
+                ev = self._get_event(retry_at)
+                if ev is None:
+                    break
+                if isinstance(ev, BaseException):
+                    raise LinkLost(f"printer port {self.port} closed while connecting: {ev}")
+                if ev.kind in (P.OK, P.START, P.FATAL):
+                    answer = ev
+            if answer is not None and answer.kind == P.OK:
+                break
+            if answer is not None and answer.kind == P.FATAL:
+                raise PrinterHalted(f"the printer reports a halt: {answer.text} (reset it, or send M999)")
+            if time.monotonic() >= deadline:
+                raise LinkLost(
+                    f"no answer from a printer on {self.port} at {self.baud} baud within "
+                    f"{self.connect_timeout:g} s; check the baud rate and that the printer is on"
+                )
+        if sent > 1:
+            # Repeated hellos each get an `ok`: let the extra ones arrive and drop them.
+            quiet = time.monotonic() + 0.5
+            while (ev := self._get_event(quiet)) is not None:
+                if isinstance(ev, BaseException):
+                    raise LinkLost(f"printer port {self.port} closed while connecting: {ev}")
+        self._next, self._top, self._confirmed = 1, 0, 0
+        self._history.clear()
+        self._inflight.clear()
+        self._history[0] = (hello, _Item("M110 N0"))
 
     def close(self) -> None:
         """Close the port (does not stop the printer; cancel first for that)."""
@@ -309,18 +338,24 @@ class SerialPrinter(PrintLink):
         poll_temps = not connecting and not self.capabilities.get("AUTOREPORT_TEMP")
 
         last_kind = None
+        last_layer = None
 
         def report(kind: str, force: bool = False):
-            # At most 10 per second, but every change of state is reported.
-            nonlocal last_report, last_kind
+            # At most 10 per second, but every change of state and of layer is reported (the AR
+            # preview highlights the layer being printed from these reports).
+            nonlocal last_report, last_kind, last_layer
             if progress is None or state is None:
                 return
             now = time.monotonic()
-            if not force and kind == last_kind and now - last_report < 0.1:
+            if not force and kind == last_kind and state.layer == last_layer and now - last_report < 0.1:
                 return
-            last_report, last_kind = now, kind
+            last_report, last_kind, last_layer = now, kind, state.layer
             elapsed = now - t0
             progress(self._progress(state, kind, elapsed, done_at_start))
+
+        def current_kind_heating() -> bool:
+            head = self._history.get(self._inflight[0].number) if self._inflight else None
+            return bool(head) and head[1].text.split()[0].upper() in ("M109", "M190")
 
         def current_kind():
             if cancelling:
@@ -332,10 +367,13 @@ class SerialPrinter(PrintLink):
                 return HEATING
             return PRINTING
 
+        applied = [self._confirmed]  # highest number applied to the job state
+
         def executed(number: int):
             frame_item = self._history.get(number)
-            if frame_item is None:
-                return
+            if frame_item is None or number <= applied[0]:
+                return  # unknown, or already counted (the printer asked again for a line it had)
+            applied[0] = number
             item = frame_item[1]
             if state is not None:
                 if item.command is not None:
@@ -371,6 +409,20 @@ class SerialPrinter(PrintLink):
                         state.status = CANCELLING
                         items.extend(_Item(c) for c in cancel_commands(state, bed_height=self.bed_height))
                     report(CANCELLING, force=True)
+                    if current_kind_heating() and self.capabilities.get("EMERGENCY_PARSER"):
+                        # Marlin's emergency parser acts on M108 as the bytes arrive, ending
+                        # the heat wait at once; it is sent past the window for that reason.
+                        item = _Item("M108")
+                        frame = P.frame(self._top + 1, item.text)
+                        self._history[self._top + 1] = (frame, item)
+                        if self._next == self._top + 1:
+                            self._top += 1
+                            self._write(frame)
+                            self._inflight.append(_Copy(self._next, len(frame), self._epoch, time.monotonic()))
+                            self._next += 1
+                        else:
+                            del self._history[self._top + 1]  # resending: it goes out in order
+                            items.appendleft(item)
                 # -- send while the window has room
                 while (
                     len(self._inflight) < self.window

@@ -84,7 +84,7 @@ def cut_segments(vertices: np.ndarray, faces: np.ndarray, face_edges: np.ndarray
     return layer, inverse[:m], inverse[m:], node_keys, points
 
 
-def chain_loops(start: np.ndarray, end: np.ndarray, n_nodes: int) -> list[np.ndarray]:
+def chain_loops(start: np.ndarray, end: np.ndarray, n_nodes: int) -> tuple[list[np.ndarray], list[bool]]:
     """Chain directed segments (node index pairs) into node sequences.
 
     Returns (chains, is_open): closed cycles come back without the repeated
@@ -94,10 +94,9 @@ def chain_loops(start: np.ndarray, end: np.ndarray, n_nodes: int) -> list[np.nda
     nxt[start] = end
     has_in = np.zeros(n_nodes, dtype=bool)
     has_in[end] = True
-    used = np.zeros(n_nodes, dtype=bool)
     chains, is_open = [], []
-    nxt_list = nxt.tolist()
-    used_list = used.tolist()
+    nxt_list = nxt.tolist()  # plain lists: the walk below is a tight Python loop
+    used_list = [False] * n_nodes
     present = np.zeros(n_nodes, dtype=bool)
     present[start] = True
     present[end] = True

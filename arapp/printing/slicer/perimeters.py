@@ -37,9 +37,8 @@ def island_walls(islands, count: int, width: float, resolution: float) -> list[l
     islands = np.asarray(islands, dtype=object)
     walls: list[list[list[np.ndarray]]] = [[] for _ in range(len(islands))]
     for i in range(count):
+        # the region is already simplified to `resolution`; mitre offsets add no vertices to simplify away
         g = shapely.buffer(islands, -(i + 0.5) * width, join_style="mitre", mitre_limit=2.0)
-        if resolution > 0:
-            g = shapely.simplify(g, resolution)
         for j, geom in enumerate(g):
             loops = [r for p in polygon_parts(geom) for r in rings(p)]
             if loops and len(walls[j]) == i:
