@@ -13,11 +13,13 @@ export MPLBACKEND ?= Agg
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml constraints.txt scripts/system-deps.sh
-	./scripts/system-deps.sh
+$(STAMP): pyproject.toml constraints.txt requirements-peers.txt scripts/system-deps.sh
+	./scripts/system-deps.sh prusa-slicer
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -c constraints.txt -e '.[test]'
+	$(PY) -m pip install -q -c constraints.txt -r requirements-peers.txt
+	$(PY) -m pip install -q --no-deps OctoPrint==1.11.8 Printrun==2.2.0
 	# pyrender pins PyOpenGL 3.1.0, which cannot use EGL on current Mesa.
 	$(PY) -m pip install -q 'PyOpenGL==3.1.10' 2>&1 | grep -v "dependency conflicts\|pyrender 0.1.45 requires\|resolver does not" || true
 	touch $(STAMP)

@@ -94,6 +94,8 @@ class ScreenshotRun:
 def run_gui(source: str | None = None, model: str | None = None, frames: int | None = None,
             screenshot: str | None = None, settings=None) -> int:
     """Open the window; with `frames`, run that many frames, save `screenshot` (when given) and return."""
+    if frames is not None and not source:
+        raise ValueError("--frames needs --source (a recording, a video or a camera)")
     ensure_platform()
     app = get_app()
     from arapp.gui.main_window import MainWindow
@@ -115,12 +117,10 @@ def run_gui(source: str | None = None, model: str | None = None, frames: int | N
     if frames is None:
         code = app.exec()
         return int(code)
-    if not source:
-        raise ValueError("--frames needs --source (a recording, a video or a camera)")
     run = ScreenshotRun(window, frames, screenshot)
     app.exec()
     window.close()
-    if run.message:
+    if run.message and run.message not in run.errors:
         print(f"arapp gui: {run.message}" + (f"; screenshot {screenshot}" if screenshot and run.exit_code == 0 else ""))
     if run.exit_code in (None, -1):
         return 1
