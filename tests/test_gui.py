@@ -427,3 +427,35 @@ def test_drag_and_drop_opens_models_and_recordings(qtbot, window, recording):
     drop(recording / "session.json")
     qtbot.waitUntil(lambda: window.source_info is not None and window.source_info.frame_count == N_FRAMES,
                     timeout=TIMEOUT_MS)
+
+
+def test_selected_control_point_is_ringed_in_the_view(qtbot, window, recording):
+    from arapp.placement import world_from_model
+    from tracking.poses import invert
+
+    window.open_source(str(recording))
+    window.replay.loop.setChecked(True)
+    window.open_model(str(MODELS / "rational_5x5.json"))
+    wait_model(qtbot, window, "rational_5x5.json")
+    qtbot.waitUntil(lambda: shows_current_model(window, len(window.mesh_lines[0].faces))
+                    and window.last_shown.result.world_from_camera is not None, timeout=TIMEOUT_MS)
+    window.engine.pause()
+    panel = window.model_panel
+    panel.u_index.setValue(4)
+    panel.v_index.setValue(4)
+    qtbot.wait(400)
+    shown = window.last_shown
+    # where the corner control point projects, the painted view shows the ring's colour (BGR 0, 240, 255)
+    info = window.source_info
+    p = np.append(window.model.surfaces[0].control_points[4, 4], 1.0)
+    cam = (invert(shown.result.world_from_camera) @ world_from_model(info.anchors[0], window.model) @ p)[:3]
+    uv = info.camera.project(cam[None, :]).reshape(-1)
+    q = window.view.image()
+    s = q.width() / info.camera.width
+    x, y = int(round(uv[0] * s)), int(round(uv[1] * s))
+    from PySide6.QtGui import QColor
+
+    colour = QColor(q.pixel(x, y))
+    assert (colour.red(), colour.green(), colour.blue()) == pytest.approx((255, 240, 0), abs=40)
+    # and the full-size composite the pipeline made is untouched by the ring
+    assert not np.all(shown.result.image[int(uv[1]), int(uv[0])] == (0, 240, 255))

@@ -66,13 +66,17 @@ class Tracker:
     are still being mapped (bounds the map's lag when frames come faster than mapping can follow,
     as in offline replay; live, keyframes are several frames apart and mapping one takes less).
     None: never wait; keyframes are skipped while mapping is behind.
+    max_lag: a keyframe's mapping (triangulation + local BA, on the mapping thread) must be finished
+    this many frames after it was submitted; tracking waits if it is not (live at 30 fps, 3 frames =
+    100 ms covers it; in fast offline replay it keeps results independent of machine load).
+    None: never wait.
     """
 
     def __init__(self, camera: Camera, anchors: list[AnchorSpec], slam: bool = True, *, marker_every: int = 3,
                  n_features: int | None = None, ba: bool = True, threaded: bool = True, max_speed: float = 2.5,
                  max_angular: float = 5.0, blend_frames: int = 8, min_inliers: int = 20, radius: float = 12.0,
                  keyframe_parallax: float = 0.08, corner_weight: float = 4.0, corner_share: float = 1 / 3,
-                 filter: bool = True, max_backlog: int | None = 0):
+                 filter: bool = True, max_backlog: int | None = 0, max_lag: int | None = 3):
         from tracking.anchors import AnchorTracker  # the anchors package is built alongside
 
         if not anchors:
@@ -88,6 +92,8 @@ class Tracker:
         self.corner_weight = corner_weight
         self.corner_share = corner_share
         self.max_backlog = max_backlog
+        self.max_lag = max_lag
+        self._kf_submissions: list[tuple[int, int]] = []   # (frame, mapper request number)
         self.K = camera.K.copy()
         # the anchors' own filter smooths the marker-only frames before the map carries the pose
         self._anchors = AnchorTracker(anchors, camera, filter=filter)
@@ -109,6 +115,7 @@ class Tracker:
         self._last_good_t: float | None = None
         self._last_state = "lost"
         self._anchored = False
+        self._since_anchor = 10**9
         self._source = None
         self._anchor_kfs = 0
         self._last_out: np.ndarray | None = None
@@ -121,6 +128,7 @@ class Tracker:
         if self.mapper is not None:
             self.mapper.wait_idle()
         self.map.clear()
+        self._kf_submissions = []
         self.motion.reset()
         self.blender.reset()
         self._anchors.reset()
@@ -178,6 +186,7 @@ class Tracker:
         """Track one frame (BGR or grey uint8, camera size) taken at time t seconds."""
         t0 = time.perf_counter()
         self._frame += 1
+        self._bound_mapping_lag()
         bgr, gray = self._prepare(image)
         usable = gray is not None
         if usable:
@@ -256,7 +265,8 @@ class Tracker:
 
         self.map.count_matches(visible, inl_ids)
         self._maybe_keyframe(t, pose, feats, inl_ids, inl_feat, corners_w, corners_uv, state, inl_xyz, inliers)
-        anchored = state == "marker" or (self._anchored and self._since_detect < self.marker_every)
+        self._since_anchor = 0 if state == "marker" else self._since_anchor + 1
+        anchored = state == "marker" or (self._anchored and self._since_anchor < self.marker_every)
         if source is None:
             source = "fused" if anchored else "map"
         out = self._output(pose if out_pose is None else out_pose, pred, source)
@@ -269,6 +279,13 @@ class Tracker:
         return TrackResult(out, state, markers, inliers, (time.perf_counter() - t0) * 1000.0)
 
     # -- pieces ---------------------------------------------------------------------
+    def _bound_mapping_lag(self) -> None:
+        if self.mapper is None or self.max_lag is None:
+            return
+        while self._kf_submissions and self._frame - self._kf_submissions[0][0] >= self.max_lag:
+            _, n = self._kf_submissions.pop(0)
+            self.mapper.wait_done(n)
+
     def _plausible(self, pose, ref, t, lost: bool = False) -> bool:
         if ref is None:
             return True
@@ -336,6 +353,7 @@ class Tracker:
         pid[inl_feat] = inl_ids
         self.mapper.submit(KeyframeRequest(t, pose.copy(), feats, pid, corners_w if state == "marker" else None,
                                            corners_uv if state == "marker" else None))
+        self._kf_submissions.append((self._frame, self.mapper.submitted))
         self._kf_frame = self._frame
         self._kf_inliers = max(inliers, 1)
         self._anchor_kfs += state == "marker"

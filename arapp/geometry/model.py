@@ -231,7 +231,11 @@ def load_model(path) -> Model:
         raise ModelError(str(path), f"not a text file ({exc.reason})") from None
     except json.JSONDecodeError as exc:
         raise ModelError(str(path), f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
-    model = model_from_dict(data, default_name=path.stem)
+    try:
+        model = model_from_dict(data, default_name=path.stem)
+    except GeometryError as exc:
+        # name the file too: the GUI and CLI show this message as it is
+        raise type(exc)(f"{path}: {exc.field}" if exc.field else str(path), exc.problem) from None
     model.path = path
     return model
 

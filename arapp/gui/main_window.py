@@ -74,6 +74,7 @@ class MainWindow(QMainWindow):
         self.full_frames = False  # also hand over full-size composited and raw frames (for checks)
         self.model_gen = 0
         self.recording_folder = None
+        self.highlight = None  # (surface, i, j): the control point being edited, ringed in the view
         self.error_sink = None  # callable(title, message) replacing dialogs (screenshot mode)
         self._open_boxes: dict[tuple[str, str], QMessageBox] = {}
         self.last_shown = None
@@ -189,6 +190,7 @@ class MainWindow(QMainWindow):
         m.placement_changed.connect(self.set_placement)
         m.mode_changed.connect(self.set_mode)
         m.point_edited.connect(self.edit_control_point)
+        m.point_selected.connect(self._point_selected)
         m.print_requested.connect(self.open_print_dialog)
         t = self.tracking_panel
         t.reset_requested.connect(self.reset_tracking)
@@ -263,6 +265,8 @@ class MainWindow(QMainWindow):
         self.view.set_image(None)
         engine.start()
         self._push_model_state()
+        if self.highlight is not None:
+            engine.set_highlight(self.highlight)
         self.replay.set_playing(True)
         self._remember("recent_sources", spec)
 
@@ -483,6 +487,9 @@ class MainWindow(QMainWindow):
         self.mesh_lines = mesh_lines
         self.placement = display_placement(model)
         self.model_panel.set_model(model, path, self.placement)
+        self.highlight = None  # ring a control point only once the user picks one
+        if self.engine is not None:
+            self.engine.set_highlight(None)
         self._push_model_state()
         self._remember("recent_models", path)
         self.statusBar().showMessage(f"Model {Path(path).name}", 3000)
@@ -505,6 +512,11 @@ class MainWindow(QMainWindow):
         self.settings.setValue("mode", mode)
         if self.engine is not None:
             self.engine.set_mode(mode)
+
+    def _point_selected(self, k: int, i: int, j: int) -> None:
+        self.highlight = (k, i, j)
+        if self.engine is not None:
+            self.engine.set_highlight(self.highlight)
 
     def edit_control_point(self, k: int, i: int, j: int, xyz: tuple, weight: float) -> None:
         """Replace surface k's control point (i, j) and its weight; re-tessellate in a worker (newest edit wins)."""

@@ -99,6 +99,7 @@ class _Child:
         self.autoplay = playing
         self.first_ready = False
         self.display_size = display_size
+        self.highlight = None
         self.state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0}
         self.models: dict = {}
         self.stop = threading.Event()
@@ -137,6 +138,7 @@ class _Child:
         processor = Processor(lambda: self._make_pipeline(info), self.captured, self.shown,
                               on_ready=self._ready, on_error=self.send_error, skipped=lambda: self.player.skipped)
         processor.display_size = self.display_size
+        processor.highlight = self.highlight
         self.processor = processor
         for fn in self.pending:
             processor.submit(fn)
@@ -214,6 +216,11 @@ class _Child:
                 self.state["mode"] = mode
 
             self.submit(set_mode)
+        elif kind == "highlight":
+            self.highlight = msg[1]
+            if self.processor is not None:
+                self.processor.highlight = msg[1]
+                self.processor.submit(lambda pipe: None)  # redraw a paused frame
         elif kind == "placement":
             placement = msg[1]
             self.submit(lambda pipe: pipe.set_placement(placement))
@@ -471,6 +478,10 @@ class RemoteEngine(QObject):
 
     def set_placement(self, placement: dict) -> None:
         self._send("placement", dict(placement))
+
+    def set_highlight(self, point: tuple[int, int, int] | None) -> None:
+        """Ring control point (surface, i, j) of the shown model on screen; None: no ring."""
+        self._send("highlight", None if point is None else tuple(int(x) for x in point))
 
     def set_mode(self, mode: str) -> None:
         self._send("mode", mode)

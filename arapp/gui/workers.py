@@ -389,8 +389,32 @@ def redraw(pipeline, item: Captured, last):
                                          color=pipeline.color)
         if pose is not None and pipeline.toolpaths is not None:
             line_sets, world_from_bed = pipeline.toolpaths
-            out = pipeline.renderer.draw_lines(out, line_sets, invert(pose) @ world_from_bed)
+            out = pipeline.renderer.draw(out, None, invert(pose) @ world_from_bed, line_sets=line_sets)
     return replace(last, image=out)
+
+
+def mark_control_point(image: np.ndarray, pipeline, world_from_camera, k: int, i: int, j: int) -> np.ndarray:
+    """A copy of `image` with control point (i, j) of surface k of the shown model ringed, where the pipeline
+    places the model (display only: the composite in FrameResult stays as the pipeline made it)."""
+    model = getattr(pipeline, "model", None)
+    if model is None or world_from_camera is None or not getattr(model, "surfaces", None):
+        return image
+    from tracking.poses import invert
+
+    p_model = np.append(np.asarray(model.surfaces[k].control_points[i, j], float), 1.0)
+    p_cam = (invert(world_from_camera) @ pipeline.world_from_model @ p_model)[:3]
+    if p_cam[2] <= 1e-3:
+        return image
+    uv = pipeline.camera.project(p_cam[None, :]).reshape(-1)
+    if not np.all(np.isfinite(uv)):
+        return image
+    out = image.copy()
+    c = (int(round(uv[0] * 4)), int(round(uv[1] * 4)))
+    r = max(6, image.shape[0] // 80)
+    cv2.circle(out, c, r * 4, (0, 0, 0), 4, cv2.LINE_AA, shift=2)
+    cv2.circle(out, c, r * 4, (0, 240, 255), 2, cv2.LINE_AA, shift=2)
+    cv2.circle(out, c, 8, (0, 240, 255), -1, cv2.LINE_AA, shift=2)
+    return out
 
 
 class Processor(threading.Thread):
@@ -407,6 +431,7 @@ class Processor(threading.Thread):
                  name: str = "arapp-process"):
         super().__init__(name=name, daemon=True)
         self.skipped = skipped or (lambda: 0)
+        self.highlight: tuple[int, int, int] | None = None  # (surface, i, j) control point marked on screen
         # (width, height) the view shows the frame at; the image is scaled here, off the UI thread,
         # so painting is a 1:1 copy. None: full size.
         self.display_size: tuple[int, int] | None = None
@@ -486,7 +511,14 @@ class Processor(threading.Thread):
                     continue
                 self._last = (item, result)
                 self.processed += 1
-                shown = Shown(result, self._qimage(result.image), item.image, item.captured_at,
+                shown_image = result.image
+                if self.highlight is not None:
+                    try:
+                        shown_image = mark_control_point(shown_image, self.pipeline, result.world_from_camera,
+                                                         *self.highlight)
+                    except (IndexError, ValueError, AttributeError):
+                        pass  # a stale selection (model changed meanwhile): draw nothing
+                shown = Shown(result, self._qimage(shown_image), item.image, item.captured_at,
                               time.perf_counter(), dropped_capture=self.inbox.dropped + self.skipped())
                 self.out.put(shown)
                 if self.on_ready is not None:
@@ -532,6 +564,7 @@ class Engine(QObject):
         self._first_ready = False
         self.display_size: tuple[int, int] | None = None
         self.model_state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0}
+        self._highlight = None
         self.player = Player(opener, self.captured, speed=speed, loop=loop, playing=False, on_demand=on_demand,
                              on_open=self._on_open, on_error=self.error.emit, on_end=self.ended.emit)
         self.player._steps = 1
@@ -552,6 +585,7 @@ class Engine(QObject):
                               on_ready=self._on_ready, on_error=self.error.emit,
                               skipped=lambda: self.player.skipped)
         processor.display_size = self.display_size
+        processor.highlight = self._highlight
         with self._lock:
             self.processor = processor
             for fn in self._pending_commands:
@@ -630,6 +664,14 @@ class Engine(QObject):
 
     def set_placement(self, placement: dict) -> None:
         self.submit(lambda p, pl=dict(placement): p.set_placement(pl))
+
+    def set_highlight(self, point: tuple[int, int, int] | None) -> None:
+        """Ring control point (surface, i, j) of the shown model on screen; None: no ring."""
+        self._highlight = point
+        with self._lock:
+            if self.processor is not None:
+                self.processor.highlight = point
+                self.processor.submit(lambda p: None)  # redraw a paused frame
 
     def set_mode(self, mode: str) -> None:
         def apply(p):

@@ -38,7 +38,7 @@ class PoseFilter:
     max_velocity_alpha: cap on the gain used to derive the velocity correction (robustness to noisy frames).
     """
 
-    def __init__(self, min_cutoff: float = 1.0, beta: float = 5.0, max_gap: float = 0.5, jump: float = 0.5,
+    def __init__(self, min_cutoff: float = 1.0, beta: float = 10.0, max_gap: float = 0.5, jump: float = 0.5,
                  max_velocity_alpha: float = 0.4):
         if min_cutoff <= 0 or beta < 0 or max_gap <= 0 or jump <= 0:
             raise ValueError("filter parameters: min_cutoff, max_gap and jump must be positive and beta >= 0")

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
+from scipy.sparse import coo_matrix
 from scipy.spatial.transform import Rotation
 
 from tracking.poses import invert
@@ -88,19 +88,24 @@ def build_problem(m: Map, newest: int, window: int = 6, scale: float = 1.2) -> B
 
 
 def solve(problem: BAProblem, K: np.ndarray, max_nfev: int = 20, huber_px: float = 2.0) -> tuple[dict, np.ndarray, np.ndarray]:
-    """Optimise; returns ({kf id: world_from_camera}, point positions (P,3), inlier mask of observations)."""
+    """Optimise; returns ({kf id: world_from_camera}, point positions (P,3), inlier mask of observations).
+
+    Parameters: per optimised keyframe a rotation increment w (R = exp(w) R0) and the
+    translation of camera_from_world; per point its world position. The Jacobian is
+    analytic and sparse (2 rows per observation: 6 pose + 3 point columns).
+    """
     pr = problem
     nk, npnt = len(pr.kf_ids), pr.points.shape[0]
     kidx = {k: i for i, k in enumerate(pr.kf_ids)}
+    R0 = np.array([pr.poses[k][:3, :3] for k in pr.kf_ids])
     x0 = np.zeros(6 * nk + 3 * npnt)
     for k, i in kidx.items():
-        T = pr.poses[k]
-        x0[6 * i:6 * i + 3] = Rotation.from_matrix(T[:3, :3]).as_rotvec()
-        x0[6 * i + 3:6 * i + 6] = T[:3, 3]
+        x0[6 * i + 3:6 * i + 6] = pr.poses[k][:3, 3]
     x0[6 * nk:] = pr.points.ravel()
 
     # every observation's camera: optimised slot i >= 0, or fixed (-1) with its pose
     o_slot = np.array([kidx.get(int(k), -1) for k in pr.obs_kf], int)
+    opt = o_slot >= 0
     a_slot = np.array([kidx[int(k)] for k in pr.anc_kf], int)
     fixed_R = np.zeros((pr.obs_kf.size, 3, 3))
     fixed_t = np.zeros((pr.obs_kf.size, 3))
@@ -109,56 +114,92 @@ def solve(problem: BAProblem, K: np.ndarray, max_nfev: int = 20, huber_px: float
             fixed_R[j] = pr.fixed_poses[int(k)][:3, :3]
             fixed_t[j] = pr.fixed_poses[int(k)][:3, 3]
     fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    m_obs, m_anc = pr.obs_kf.size, a_slot.size
+    slot = np.maximum(o_slot, 0)
 
-    def proj(R, t, X):
-        Xc = np.einsum("nij,nj->ni", R, X) + t
+    def unpack(x):
+        rv = x[:6 * nk].reshape(nk, 6)
+        Rs = Rotation.from_rotvec(rv[:, :3]).as_matrix() @ R0
+        return Rs, rv[:, 3:], x[6 * nk:].reshape(npnt, 3)
+
+    def cams(x):
+        Rs, ts, P = unpack(x)
+        R = np.where(opt[:, None, None], Rs[slot], fixed_R)
+        t = np.where(opt[:, None], ts[slot], fixed_t)
+        return Rs, ts, P, R, t
+
+    def proj(Xc):
         z = np.maximum(Xc[:, 2], 1e-6)
         return np.stack([fx * Xc[:, 0] / z + cx, fy * Xc[:, 1] / z + cy], axis=1)
 
     def residuals(x):
-        rv = x[:6 * nk].reshape(nk, 6)
-        Rs = Rotation.from_rotvec(rv[:, :3]).as_matrix()
-        ts = rv[:, 3:]
-        P = x[6 * nk:].reshape(npnt, 3)
-        opt = o_slot >= 0
-        R = np.where(opt[:, None, None], Rs[np.maximum(o_slot, 0)], fixed_R)
-        t = np.where(opt[:, None], ts[np.maximum(o_slot, 0)], fixed_t)
-        r1 = (proj(R, t, P[pr.obs_pt]) - pr.obs_uv) * pr.obs_w[:, None]
-        if a_slot.size:
-            r2 = (proj(Rs[a_slot], ts[a_slot], pr.anc_xyz) - pr.anc_uv) * ANCHOR_WEIGHT
+        Rs, ts, P, R, t = cams(x)
+        Xc = np.einsum("nij,nj->ni", R, P[pr.obs_pt]) + t
+        r1 = (proj(Xc) - pr.obs_uv) * pr.obs_w[:, None]
+        if m_anc:
+            Xa = np.einsum("nij,nj->ni", Rs[a_slot], pr.anc_xyz) + ts[a_slot]
+            r2 = (proj(Xa) - pr.anc_uv) * ANCHOR_WEIGHT
             return np.concatenate([r1.ravel(), r2.ravel()])
         return r1.ravel()
 
-    m_obs = pr.obs_kf.size
-    A = lil_matrix((2 * m_obs + 2 * a_slot.size, x0.size), dtype=np.int8)
-    rows = np.arange(m_obs)
-    for c in range(3):
-        A[2 * rows, 6 * nk + 3 * pr.obs_pt + c] = 1
-        A[2 * rows + 1, 6 * nk + 3 * pr.obs_pt + c] = 1
-    opt_rows = rows[o_slot >= 0]
-    for c in range(6):
-        A[2 * opt_rows, 6 * o_slot[opt_rows] + c] = 1
-        A[2 * opt_rows + 1, 6 * o_slot[opt_rows] + c] = 1
-    arows = np.arange(a_slot.size)
-    for c in range(6):
-        A[2 * m_obs + 2 * arows, 6 * a_slot + c] = 1
-        A[2 * m_obs + 2 * arows + 1, 6 * a_slot + c] = 1
+    def dproj(Xc, w):
+        """(n,2,3) derivative of the weighted projection by the camera-frame point."""
+        z = np.maximum(Xc[:, 2], 1e-6)
+        J = np.zeros((Xc.shape[0], 2, 3))
+        J[:, 0, 0] = fx / z
+        J[:, 0, 2] = -fx * Xc[:, 0] / z**2
+        J[:, 1, 1] = fy / z
+        J[:, 1, 2] = -fy * Xc[:, 1] / z**2
+        return J * w[:, None, None]
+
+    def dpose(Jp, Xc, t):
+        """(n,2,6) by the rotation increment (left, d(exp(w) R0 X) = -[R X]x dw) and translation."""
+        RX = Xc - t
+        S = np.zeros((Xc.shape[0], 3, 3))
+        S[:, 0, 1], S[:, 0, 2] = RX[:, 2], -RX[:, 1]
+        S[:, 1, 0], S[:, 1, 2] = -RX[:, 2], RX[:, 0]
+        S[:, 2, 0], S[:, 2, 1] = RX[:, 1], -RX[:, 0]
+        return np.concatenate([Jp @ S, Jp], axis=2)
+
+    n_rows = 2 * (m_obs + m_anc)
+    r_obs = np.repeat(np.arange(2 * m_obs).reshape(m_obs, 2), 3, axis=1).reshape(m_obs, 2, 3)
+    c_pt = (6 * nk + 3 * pr.obs_pt[:, None, None] + np.arange(3)[None, None, :]).repeat(2, axis=1)
+    oi = np.nonzero(opt)[0]
+    r_po = np.repeat(np.arange(2 * m_obs).reshape(m_obs, 2)[oi], 6, axis=1).reshape(oi.size, 2, 6)
+    c_po = (6 * o_slot[oi][:, None, None] + np.arange(6)[None, None, :]).repeat(2, axis=1)
+    r_an = np.repeat((2 * m_obs + np.arange(2 * m_anc)).reshape(m_anc, 2), 6, axis=1).reshape(m_anc, 2, 6)
+    c_an = (6 * a_slot[:, None, None] + np.arange(6)[None, None, :]).repeat(2, axis=1)
+    rows = np.concatenate([r_obs.ravel(), r_po.ravel(), r_an.ravel()])
+    cols = np.concatenate([c_pt.ravel(), c_po.ravel(), c_an.ravel()])
+
+    def jacobian(x):
+        Rs, ts, P, R, t = cams(x)
+        Xc = np.einsum("nij,nj->ni", R, P[pr.obs_pt]) + t
+        Jp = dproj(Xc, pr.obs_w)
+        J_pt = Jp @ R
+        J_po = dpose(Jp[oi], Xc[oi], t[oi])
+        parts = [J_pt.ravel(), J_po.ravel()]
+        if m_anc:
+            Xa = np.einsum("nij,nj->ni", Rs[a_slot], pr.anc_xyz) + ts[a_slot]
+            Ja = dproj(Xa, np.full(m_anc, ANCHOR_WEIGHT))
+            parts.append(dpose(Ja, Xa, ts[a_slot]).ravel())
+        return coo_matrix((np.concatenate(parts), (rows, cols)), shape=(n_rows, x0.size)).tocsr()
+
     # Two stages: plain least squares pulls a perturbed window into the basin (scipy's robust
     # losses stall from far away), then the Huber loss from there discounts outlier observations.
-    jac = A.tocsr()
-    res = least_squares(residuals, x0, jac_sparsity=jac, loss="linear", method="trf", x_scale="jac",
-                        max_nfev=max(2, max_nfev // 2), tr_solver="lsmr")
-    res = least_squares(residuals, res.x, jac_sparsity=jac, loss="huber", f_scale=huber_px, method="trf",
-                        x_scale="jac", max_nfev=max(2, max_nfev - res.nfev), tr_solver="lsmr")
+    res = least_squares(residuals, x0, jac=jacobian, loss="linear", method="trf", x_scale="jac",
+                        max_nfev=max(2, max_nfev // 2), tr_solver="lsmr", tr_options={"maxiter": 40})
+    res = least_squares(residuals, res.x, jac=jacobian, loss="huber", f_scale=huber_px, method="trf",
+                        x_scale="jac", max_nfev=max(2, max_nfev - res.nfev), tr_solver="lsmr",
+                        tr_options={"maxiter": 40})
     x = res.x
-    rv = x[:6 * nk].reshape(nk, 6)
+    Rs, ts, P = unpack(x)
     poses = {}
     for k, i in kidx.items():
         T = np.eye(4)
-        T[:3, :3] = Rotation.from_rotvec(rv[i, :3]).as_matrix()
-        T[:3, 3] = rv[i, 3:]
+        T[:3, :3] = Rs[i]
+        T[:3, 3] = ts[i]
         poses[k] = invert(T)
-    P = x[6 * nk:].reshape(npnt, 3)
     r = residuals(x)[:2 * m_obs].reshape(-1, 2) / pr.obs_w[:, None]
     inl = (r**2).sum(1) < 5.991 * 2.0
     return poses, P, inl
@@ -182,6 +223,7 @@ def local_bundle_adjustment(m: Map, newest: int, K: np.ndarray, window: int = 5,
             p = m.points.get(int(pid))
             if p is not None:
                 p.xyz = P[i]
+                p.ready = True
         m.version += 1
     # observations BA could not explain are dropped; points left with < 2 views go
     for pid, kids in bad_obs.items():

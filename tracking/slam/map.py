@@ -50,6 +50,7 @@ class MapPoint:
     desc: np.ndarray
     obs: dict[int, int]
     first_kf: int
+    ready: bool = True     # tracking uses a new point only once bundle adjustment has refined it
 
 
 class Map:
@@ -87,9 +88,9 @@ class Map:
             self.version += 1
             return kf
 
-    def add_point(self, xyz: np.ndarray, desc: np.ndarray, obs: dict[int, int]) -> MapPoint:
+    def add_point(self, xyz: np.ndarray, desc: np.ndarray, obs: dict[int, int], ready: bool = True) -> MapPoint:
         with self.lock:
-            p = MapPoint(self._next_pt, np.asarray(xyz, float).copy(), desc.copy(), dict(obs), min(obs))
+            p = MapPoint(self._next_pt, np.asarray(xyz, float).copy(), desc.copy(), dict(obs), min(obs), ready)
             self._next_pt += 1
             self.points[p.id] = p
             for kid, fi in obs.items():
@@ -116,10 +117,11 @@ class Map:
 
     # -- reading ----------------------------------------------------------------
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(ids (N,), positions (N,3), descriptors (N,32)) of all points; cached until the map changes."""
+        """(ids (N,), positions (N,3), descriptors (N,32)) of the points ready for tracking; cached
+        until the map changes."""
         with self.lock:
             if self._cache_version != self.version:
-                pts = list(self.points.values())
+                pts = [p for p in self.points.values() if p.ready]
                 if pts:
                     self._cache = (np.array([p.id for p in pts], int), np.array([p.xyz for p in pts]),
                                    np.array([p.desc for p in pts], np.uint8))
@@ -144,6 +146,15 @@ class Map:
         if pid < self._visible.size:
             return int(self._visible[pid]) + 1, int(self._found[pid]) + 1
         return 1, 1
+
+    def mark_ready(self, ids=None) -> None:
+        """Let tracking use these points (all when ids is None)."""
+        with self.lock:
+            for pid in (self.points if ids is None else ids):
+                p = self.points.get(int(pid))
+                if p is not None and not p.ready:
+                    p.ready = True
+                    self.version += 1
 
     def recent_keyframes(self, n: int) -> list[Keyframe]:
         with self.lock:

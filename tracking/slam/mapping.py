@@ -131,6 +131,8 @@ class LocalMapper:
         self.threaded = threaded
         self._q: queue.Queue = queue.Queue()
         self._untriangulated = 0          # submitted keyframes not yet mapped and adjusted
+        self.submitted = 0                # keyframe requests handed in so far
+        self.done = 0                     # of those, fully mapped
         self._cv = threading.Condition()
         self._thread = None
         self.ba_runs = 0
@@ -146,6 +148,7 @@ class LocalMapper:
         return self._untriangulated
 
     def submit(self, req: KeyframeRequest) -> None:
+        self.submitted += 1
         if self.threaded:
             with self._cv:
                 self._untriangulated += 1
@@ -195,7 +198,8 @@ class LocalMapper:
                 with m.lock:
                     if kf.point_ids[i] >= 0 or nb.point_ids[j] >= 0:
                         continue
-                    m.add_point(X, kf.feats.desc[i], {kf.id: i, nb.id: j})
+                    # raw triangulations stay hidden from tracking until bundle adjustment refines them
+                    m.add_point(X, kf.feats.desc[i], {kf.id: i, nb.id: j}, ready=not self.ba)
         m.cull(kf.id)
         self._trim()
         # when more keyframes wait, BA every other keyframe: the newest ones matter more
@@ -208,10 +212,17 @@ class LocalMapper:
         self._triangulated()
 
     def _triangulated(self) -> None:
-        if self.threaded:
-            with self._cv:
-                self._untriangulated = max(0, self._untriangulated - 1)
-                self._cv.notify_all()
+        with self._cv:
+            self.done += 1
+            self._untriangulated = max(0, self._untriangulated - 1)
+            self._cv.notify_all()
+
+    def wait_done(self, n: int, timeout: float = 10.0) -> None:
+        """Block until the first n submitted keyframes are mapped."""
+        if not self.threaded:
+            return
+        with self._cv:
+            self._cv.wait_for(lambda: self.done >= n or self._thread is None, timeout=timeout)
 
     def _trim(self) -> None:
         """Bound memory: drop the oldest non-anchor keyframes beyond max_keyframes."""
