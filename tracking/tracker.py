@@ -37,6 +37,8 @@ from tracking.slam.relocalise import relocalise
 from tracking.slam.tracking import MotionModel, match_by_projection, plausible, pnp_ransac, refine_pose
 
 MIN_SIDE = 48  # pixels: smaller frames carry nothing trackable
+MAX_TRACKS = 200  # keypoints followed by optical flow between full frames
+KLT_WIN, KLT_LEVELS = (15, 15), 3
 
 
 @dataclass
@@ -70,13 +72,16 @@ class Tracker:
     this many frames after it was submitted; tracking waits if it is not (live at 30 fps, 3 frames =
     100 ms covers it; in fast offline replay it keeps results independent of machine load).
     None: never wait.
+    klt: between full frames (those with marker detection), follow the last inlier keypoints by
+    optical flow instead of detecting and matching ORB features (much cheaper per frame).
     """
 
     def __init__(self, camera: Camera, anchors: list[AnchorSpec], slam: bool = True, *, marker_every: int = 3,
                  n_features: int | None = None, ba: bool = True, threaded: bool = True, max_speed: float = 2.5,
                  max_angular: float = 5.0, blend_frames: int = 8, min_inliers: int = 20, radius: float = 12.0,
                  keyframe_parallax: float = 0.08, corner_weight: float = 4.0, corner_share: float = 1 / 3,
-                 filter: bool = True, max_backlog: int | None = 0, max_lag: int | None = 3):
+                 filter: bool = True, max_backlog: int | None = 0, max_lag: int | None = 3,
+                 klt: bool = True):
         from tracking.anchors import AnchorTracker  # the anchors package is built alongside
 
         if not anchors:
@@ -93,6 +98,7 @@ class Tracker:
         self.corner_share = corner_share
         self.max_backlog = max_backlog
         self.max_lag = max_lag
+        self.klt = klt
         self._kf_submissions: list[tuple[int, int]] = []   # (frame, mapper request number)
         self.K = camera.K.copy()
         # the anchors' own filter smooths the marker-only frames before the map carries the pose
@@ -120,6 +126,8 @@ class Tracker:
         self._anchor_kfs = 0
         self._last_out: np.ndarray | None = None
         self._kf_frame = -(10**9)
+        self._tracks = None
+        self._full_tracks = 0
         self._kf_inliers = 0
         self._depth = 0.5
 
@@ -200,6 +208,11 @@ class Tracker:
 
         detect = (self._since_detect + 1 >= self.marker_every or self._lost > 0 or len(self.map.points) < 60
                   or self.motion.last is None)
+        if not detect and self.klt:
+            res = self._klt_frame(gray, t, t0)
+            if res is not None:
+                self._since_detect += 1
+                return res
         fut = self._pool.submit(self._anchors.process, bgr, t) if detect else None
         feats = self.extractor.extract(gray)
         ar = fut.result() if fut is not None else None
@@ -265,6 +278,17 @@ class Tracker:
 
         self.map.count_matches(visible, inl_ids)
         self._maybe_keyframe(t, pose, feats, inl_ids, inl_feat, corners_w, corners_uv, state, inl_xyz, inliers)
+        # keypoints to follow by optical flow until the next full frame
+        self._tracks = None
+        if inl_feat.size:
+            # a spread subset is plenty for the pose and keeps the flow cheap
+            sel = np.arange(inl_feat.size) if inl_feat.size <= MAX_TRACKS else np.linspace(
+                0, inl_feat.size - 1, MAX_TRACKS).astype(int)
+            self._tracks = (gray, feats.xy[inl_feat[sel]].astype(np.float32), inl_xyz[sel].copy())
+        self._full_tracks = int(min(inl_feat.size, MAX_TRACKS))
+        return self._finish(pose, pred, state, source, out_pose, markers, inliers, t, t0)
+
+    def _finish(self, pose, pred, state, source, out_pose, markers, inliers, t, t0) -> TrackResult:
         self._since_anchor = 0 if state == "marker" else self._since_anchor + 1
         anchored = state == "marker" or (self._anchored and self._since_anchor < self.marker_every)
         if source is None:
@@ -279,6 +303,31 @@ class Tracker:
         return TrackResult(out, state, markers, inliers, (time.perf_counter() - t0) * 1000.0)
 
     # -- pieces ---------------------------------------------------------------------
+    def _klt_frame(self, gray, t, t0) -> TrackResult | None:
+        """Between full frames: follow last frame's inlier keypoints by pyramidal Lucas-Kanade flow and
+        refine the pose on them (no detection, no descriptors). None when that is not good enough."""
+        if self._tracks is None or self.motion.last is None:
+            return None
+        prev, xy, X = self._tracks
+        if xy.shape[0] < max(2 * self.min_inliers, 0.5 * self._full_tracks):
+            return None
+        nxt, st, _ = cv2.calcOpticalFlowPyrLK(prev, gray, xy.reshape(-1, 1, 2), None, winSize=KLT_WIN, maxLevel=KLT_LEVELS,
+                                              criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 10, 0.05))
+        nxt = nxt.reshape(-1, 2)
+        ok = (st.ravel() == 1) & (nxt[:, 0] >= 0) & (nxt[:, 1] >= 0) & (nxt[:, 0] < gray.shape[1]) & (
+            nxt[:, 1] < gray.shape[0])
+        if ok.sum() < self.min_inliers:
+            return None
+        und = self.camera.undistort_points(nxt[ok].astype(float)) if self.camera.has_distortion else nxt[ok].astype(float)
+        pred = self.motion.predict(t)
+        pose, inl, _ = refine_pose(self.K, pred, X[ok], und)
+        if inl.sum() < max(self.min_inliers, 0.5 * ok.sum()) or not self._plausible(pose, self.motion.last, t):
+            return None
+        keep = np.nonzero(ok)[0][inl]
+        self._tracks = (gray, nxt[keep].astype(np.float32), X[keep])
+        return self._finish(pose, pred, "slam", None, None, 0, int(inl.sum()), t, t0)
+
+
     def _bound_mapping_lag(self) -> None:
         if self.mapper is None or self.max_lag is None:
             return
@@ -370,6 +419,7 @@ class Tracker:
 
     def _lost_frame(self, t0: float, markers: int) -> TrackResult:
         self._lost += 1
+        self._tracks = None
         self.motion.lose()
         self.blender.reset()
         self._last_state = "lost"
