@@ -141,18 +141,7 @@ class Pipeline:
         t0 = time.perf_counter()
         res = self.tracker.process(image, t)
         t1 = time.perf_counter()
-        out = image
-        if self.draw:
-            out = image.copy()
-            pose = res.world_from_camera
-            if pose is not None and self.mesh is not None:
-                camera_from_model = invert(pose) @ self.world_from_model
-                out = self.renderer.draw(out, self.mesh, camera_from_model, mode=self.mode,
-                                         lines=self.lines if self.mode == "isolines" else None,
-                                         color=self.color)
-            if pose is not None and self.toolpaths is not None:
-                line_sets, world_from_bed = self.toolpaths
-                out = self.renderer.draw(out, None, invert(pose) @ world_from_bed, line_sets=line_sets)
+        out = self.draw_overlay(image, res.world_from_camera) if self.draw else image
         t2 = time.perf_counter()
         if self._last_time is not None and t2 > self._last_time:
             inst = 1.0 / (t2 - self._last_time)
@@ -162,6 +151,26 @@ class Pipeline:
             draw_status(out, res.state, self._fps, res.markers, res.inliers)
         return FrameResult(index, t, res.world_from_camera, res.state, res.markers, res.inliers,
                            float(res.ms), (t2 - t1) * 1e3, out)
+
+    def draw_overlay(self, image: np.ndarray, world_from_camera: np.ndarray | None) -> np.ndarray:
+        """A copy of the BGR `image` with the model (and toolpaths) drawn as seen from `world_from_camera`.
+
+        The drawing half of `process`, without tracking: a paused view redraws
+        with new settings through it, and the tracker never sees a frame twice.
+        """
+        out = image.copy()
+        if world_from_camera is None:
+            return out
+        camera_from_world = invert(world_from_camera)
+        if self.mesh is not None:
+            out = self.renderer.draw(out, self.mesh, camera_from_world @ self.world_from_model, mode=self.mode,
+                                     lines=self.lines if self.mode == "isolines" else None, color=self.color,
+                                     inplace=True)
+        if self.toolpaths is not None:
+            line_sets, world_from_bed = self.toolpaths
+            out = self.renderer.draw(out, None, camera_from_world @ world_from_bed, line_sets=line_sets,
+                                     inplace=True)
+        return out
 
     def close(self) -> None:
         self.tracker.close()

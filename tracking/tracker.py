@@ -214,7 +214,10 @@ class Tracker:
                 self._since_detect += 1
                 return res
         fut = self._pool.submit(self._anchors.process, bgr, t) if detect else None
-        feats = self.extractor.extract(gray)
+        # while the map is young, features are only needed on frames that may become keyframes
+        young = len(self.map.points) < 60
+        need_feats = not (young and detect) or self._frame - self._kf_frame >= 5 or len(self.map.keyframes) == 0
+        feats = self.extractor.extract(gray) if need_feats else Features.empty()
         ar = fut.result() if fut is not None else None
         self._since_detect = 0 if detect else self._since_detect + 1
 

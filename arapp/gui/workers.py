@@ -376,20 +376,7 @@ def redraw(pipeline, item: Captured, last):
     """
     from dataclasses import replace
 
-    from tracking.poses import invert
-
-    out = item.image
-    pose = last.world_from_camera
-    if pipeline.draw:
-        out = item.image.copy()
-        if pose is not None and pipeline.mesh is not None:
-            camera_from_model = invert(pose) @ pipeline.world_from_model
-            out = pipeline.renderer.draw(out, pipeline.mesh, camera_from_model, mode=pipeline.mode,
-                                         lines=pipeline.lines if pipeline.mode == "isolines" else None,
-                                         color=pipeline.color)
-        if pose is not None and pipeline.toolpaths is not None:
-            line_sets, world_from_bed = pipeline.toolpaths
-            out = pipeline.renderer.draw(out, None, invert(pose) @ world_from_bed, line_sets=line_sets)
+    out = pipeline.draw_overlay(item.image, last.world_from_camera) if pipeline.draw else item.image
     return replace(last, image=out)
 
 
