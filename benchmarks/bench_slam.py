@@ -68,9 +68,10 @@ def run(quick: bool = False) -> str:
         s, p = r["slam"], r["plain"]
         jr = s.jitter_m / p.jitter_m if p.jitter_m > 0 else float("nan")
         tr = r["slam_ms"] / r["plain_ms"] if r["plain_ms"] > 0 else float("nan")
+        ext = f"{100 * s.ate_fraction_of_extent:.2f} %" if s.extent_m > 0.05 else f"n/a (extent {s.extent_m * 1000:.0f} mm)"
         out.append(
             f"| {r['name']} | {r['size']} | {s.tracked_fraction:.1%} / {p.tracked_fraction:.1%} "
-            f"| {s.ate_rmse_m * 1000:.2f} / {p.ate_rmse_m * 1000:.2f} | {100 * s.ate_fraction_of_extent:.2f} % "
+            f"| {s.ate_rmse_m * 1000:.2f} / {p.ate_rmse_m * 1000:.2f} | {ext} "
             f"| {s.ate_max_m * 1000:.1f} / {p.ate_max_m * 1000:.1f} "
             f"| {s.jitter_m * 1000:.2f} / {p.jitter_m * 1000:.2f} ({jr:.2f}) | {s.rpe_trans_m_per_s:.4f} "
             f"| {r['slam_ms']:.1f} / {r['plain_ms']:.1f} ({tr:.2f}) | {r['slam_p95']:.1f} |")

@@ -76,7 +76,7 @@ class Tracker:
     optical flow instead of detecting and matching ORB features (much cheaper per frame).
     """
 
-    def __init__(self, camera: Camera, anchors: list[AnchorSpec], slam: bool = True, *, marker_every: int = 3,
+    def __init__(self, camera: Camera, anchors: list[AnchorSpec], slam: bool = True, *, marker_every: int = 4,
                  n_features: int | None = None, ba: bool = True, threaded: bool = True, max_speed: float = 2.5,
                  max_angular: float = 5.0, blend_frames: int = 8, min_inliers: int = 20, radius: float = 12.0,
                  keyframe_parallax: float = 0.08, corner_weight: float = 4.0, corner_share: float = 1 / 3,
@@ -206,8 +206,8 @@ class Tracker:
         if not self.slam:
             return self._marker_only(bgr, t, t0)
 
-        detect = (self._since_detect + 1 >= self.marker_every or self._lost > 0 or len(self.map.points) < 60
-                  or self.motion.last is None)
+        young = len(self.map.points) < 60 or len(self.map.keyframes) < 4
+        detect = self._since_detect + 1 >= self.marker_every or self._lost > 0 or young or self.motion.last is None
         if not detect and self.klt:
             res = self._klt_frame(gray, t, t0)
             if res is not None:
@@ -215,7 +215,6 @@ class Tracker:
                 return res
         fut = self._pool.submit(self._anchors.process, bgr, t) if detect else None
         # while the map is young, features are only needed on frames that may become keyframes
-        young = len(self.map.points) < 60
         need_feats = not (young and detect) or self._frame - self._kf_frame >= 5 or len(self.map.keyframes) == 0
         feats = self.extractor.extract(gray) if need_feats else Features.empty()
         ar = fut.result() if fut is not None else None
@@ -242,8 +241,15 @@ class Tracker:
             if pred is not None and self._lost == 0 and not self._plausible(anchor_pose, pred, t):
                 init = pred  # a flipped planar solution: let the corners pull from the tracked pose
             pi, fi = self._match(init, X, D, feats, self.radius)
+            share = 0.8 if young else self.corner_share   # a young map must not pull the markers
             p, cin, min_, _ = fuse_pose(self.K, init, corners_w, corners_uv, X[pi], feats.und[fi], self.corner_weight,
-                                      corner_share=self.corner_share)
+                                      corner_share=share)
+            if cin.any() and share < 0.8:
+                cerr = np.linalg.norm(self.camera.project_world(corners_w, p) - self.camera.project_world(
+                    corners_w, anchor_pose), axis=1).max()
+                if cerr > 1.5:   # map and markers disagree: the markers win, BA corrects the map
+                    p, cin, min_, _ = fuse_pose(self.K, init, corners_w, corners_uv, X[pi], feats.und[fi],
+                                                self.corner_weight, corner_share=0.8)
             if cin.mean() < 0.75 and init is not anchor_pose:
                 p, cin, min_, _ = fuse_pose(self.K, anchor_pose, corners_w, corners_uv, X[pi], feats.und[fi],
                                             self.corner_weight, corner_share=self.corner_share)
@@ -252,8 +258,10 @@ class Tracker:
                 p, cin, _ = refine_pose(self.K, anchor_pose, corners_w, corners_uv)
                 min_ = np.zeros(pi.size, bool)
             pose, state = p, "marker"
-            if min_.sum() < self.min_inliers and ar.world_from_camera is not None:
-                source = "anchors"     # the map does not help yet: the anchors' filtered pose
+            if min_.sum() < self.min_inliers and ar.world_from_camera is not None and len(corners_w) < 12:
+                # the map does not help yet and one marker's pose is noisy: the anchors' filtered pose
+                # (a board's many corners are precise as they are; its filter would only add lag)
+                source = "anchors"
                 out_pose = np.asarray(ar.world_from_camera, float)
             inliers = int(cin.sum() + min_.sum())
             inl_ids, inl_feat, inl_xyz = ids[pi[min_]], fi[min_], X[pi[min_]]
@@ -312,19 +320,21 @@ class Tracker:
         if self._tracks is None or self.motion.last is None:
             return None
         prev, xy, X = self._tracks
-        if xy.shape[0] < max(2 * self.min_inliers, 0.5 * self._full_tracks):
+        # flow only from a well-supported full frame, and only while most of its tracks survive
+        if self._full_tracks < 4 * self.min_inliers or xy.shape[0] < 0.6 * self._full_tracks:
             return None
-        nxt, st, _ = cv2.calcOpticalFlowPyrLK(prev, gray, xy.reshape(-1, 1, 2), None, winSize=KLT_WIN, maxLevel=KLT_LEVELS,
+        nxt, st, err = cv2.calcOpticalFlowPyrLK(prev, gray, xy.reshape(-1, 1, 2), None, winSize=KLT_WIN, maxLevel=KLT_LEVELS,
                                               criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 10, 0.05))
         nxt = nxt.reshape(-1, 2)
-        ok = (st.ravel() == 1) & (nxt[:, 0] >= 0) & (nxt[:, 1] >= 0) & (nxt[:, 0] < gray.shape[1]) & (
+        # patch dissimilarity: a hand or a reflection sliding over a keypoint is not followed
+        ok = (st.ravel() == 1) & (err.ravel() < 20.0) & (nxt[:, 0] >= 0) & (nxt[:, 1] >= 0) & (nxt[:, 0] < gray.shape[1]) & (
             nxt[:, 1] < gray.shape[0])
         if ok.sum() < self.min_inliers:
             return None
         und = self.camera.undistort_points(nxt[ok].astype(float)) if self.camera.has_distortion else nxt[ok].astype(float)
         pred = self.motion.predict(t)
         pose, inl, _ = refine_pose(self.K, pred, X[ok], und)
-        if inl.sum() < max(self.min_inliers, 0.5 * ok.sum()) or not self._plausible(pose, self.motion.last, t):
+        if inl.sum() < max(self.min_inliers, 0.8 * ok.sum()) or not self._plausible(pose, self.motion.last, t):
             return None
         keep = np.nonzero(ok)[0][inl]
         self._tracks = (gray, nxt[keep].astype(np.float32), X[keep])
@@ -411,10 +421,11 @@ class Tracker:
         self._anchor_kfs += state == "marker"
 
     def _output(self, pose, pred, source: str) -> np.ndarray:
-        """Seamless output: fade the step when the source (anchors / fused / map) changes, or after a short loss."""
+        """Seamless output: fade the step when the source (anchors / fused / map) changes."""
         changed = source != self._source
         self._source = source
-        if self._last_out is not None and pred is not None and self._lost < 5 and (changed or self._lost > 0):
+        # after lost frames nothing was shown: the new pose is taken as it is, not faded from a stale one
+        if self._last_out is not None and pred is not None and self._lost == 0 and changed:
             # where the output would have gone: the last output moved by the predicted camera motion
             target = self._last_out @ np.linalg.inv(self.motion.last) @ pred
             self.blender.switch(pose, target)

@@ -79,7 +79,7 @@ class FeatureExtractor:
     """
 
     def __init__(self, camera: Camera, n_features: int = 800, levels: int = 4, scale: float = 1.2,
-                 grid: tuple[int, int] | None = None, fast_threshold: int = 20, min_fast_threshold: int = 7,
+                 grid: tuple[int, int] | None = None, fast_threshold: int = 12, min_fast_threshold: int = 6,
                  max_width: int = 960):
         self.camera = camera
         # large frames are searched at a reduced size (keypoints mapped back to full-size pixels)
