@@ -12,6 +12,9 @@ def add_arguments(parser):
     parser.add_argument("--mode", default="shaded", choices=["shaded", "wireframe", "isolines", "translucent"],
                         help="display mode of the model")
     parser.add_argument("--no-slam", action="store_true", help="markers only, no keypoint tracking")
+    parser.add_argument("--marker-every", type=int, default=4,
+                        help="detect markers every N frames once keypoints carry the pose (1: every frame, "
+                        "most accurate, slowest; default 4)")
     parser.add_argument("--frames", type=int, help="stop after this many frames")
     parser.add_argument("--printer", help="printer profile JSON (for --toolpaths)")
     parser.add_argument("--toolpaths", help="G-code whose toolpaths are drawn on the printer bed")
@@ -26,9 +29,8 @@ def run(args):
         placement = {"size_mm": args.size}
     opts = ReplayOptions(model=args.model, placement=placement, mode=args.mode, video=not args.no_video,
                          slam=not args.no_slam, max_frames=args.frames, printer=args.printer,
-                         toolpaths=args.toolpaths, layer=args.layer)
-    if placement is None and args.model:
-        opts.placement = None
+                         toolpaths=args.toolpaths, layer=args.layer,
+                         tracker_params={"marker_every": args.marker_every} if not args.no_slam else {})
     report = replay(args.recording, args.out, opts, progress=terminal_progress())
     keys = ["frames", "tracked_fraction", "fps", "ate_rmse_m", "ate_max_m", "rpe_trans_m_per_s", "rpe_rot_deg_per_s"]
     summary = ", ".join(f"{k} {report[k]:.4g}" for k in keys if isinstance(report.get(k), (int, float)))
