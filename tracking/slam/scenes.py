@@ -99,45 +99,26 @@ def run_tracker(tracker, frames) -> dict:
 
 def load_recording(folder, frames: slice | None = None):
     """Frames [(t, BGR image, true world_from_camera)] of a recording folder with groundtruth.tum,
-    and its Session. Times from frames.csv when present, else frame / fps."""
+    and its Session (read through tracking.sources.RecordingSource, so times follow the contract)."""
     from pathlib import Path
-
-    import cv2
 
     from tracking.errors import SourceError
     from tracking.poses import read_tum
-    from tracking.session import load_session
+    from tracking.sources import RecordingSource
 
     folder = Path(folder)
-    session = load_session(folder)
     gt_path = folder / "groundtruth.tum"
     if not gt_path.is_file():
         raise SourceError(f"{folder}: no groundtruth.tum; scoring needs the true poses")
     gt_t, gt = read_tum(gt_path)
-    cap = cv2.VideoCapture(str(session.video_path))
-    if not cap.isOpened():
-        raise SourceError(f"{session.video_path}: OpenCV cannot open this video")
-    times = None
-    csv = folder / "frames.csv"
-    if csv.is_file():
-        rows = np.loadtxt(csv, delimiter=",", skiprows=1, ndmin=2)
-        times = dict(zip(rows[:, 0].astype(int), rows[:, 1]))
-    out, i = [], 0
-    wanted = None
-    if frames is not None:
-        wanted = set(range(len(gt_t))[frames])
-    try:
-        while True:
-            ok, img = cap.read()
-            if not ok:
+    out = []
+    with RecordingSource(folder) as source:
+        session = source.session
+        wanted = set(range(source.frame_count)[frames]) if frames is not None else None
+        for frame in source:
+            if wanted is not None and frame.index > max(wanted, default=-1):
                 break
-            if wanted is None or i in wanted:
-                t = times[i] if times is not None and i in times else i / session.fps
-                j = int(np.argmin(np.abs(gt_t - t)))
-                out.append((float(t), img, gt[j]))
-            i += 1
-            if wanted is not None and i > max(wanted):
-                break
-    finally:
-        cap.release()
+            if wanted is None or frame.index in wanted:
+                j = int(np.argmin(np.abs(gt_t - frame.t)))
+                out.append((float(frame.t), frame.image, gt[j]))
     return out, session
