@@ -366,6 +366,7 @@ def test_print_dialog_slices_saves_and_reports_a_printer_error(qtbot, window, tm
     window.model_panel.size.setValue(20.0)
     window.open_print_dialog()
     dlg = window._print_dialog
+    dlg.work_dir = tmp_path / "jobs"
     dlg.layer_height.setValue(0.3)
     dlg.infill.setValue(10)
     progress = []

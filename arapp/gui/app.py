@@ -48,10 +48,21 @@ class ScreenshotRun:
     def _error(self, title: str, message: str) -> None:
         self.errors.append(f"{title}: {message}")
         print(f"arapp gui: {title}: {message}", file=sys.stderr)
-        if self.window.frames_painted == 0:
+        if self.window.frames_painted == 0 or title == "Cannot show the print preview":
             self._finish(2, f"{title}: {message}")  # nothing to show: the picture would only be the error
 
+    def _toolpaths_drawn(self) -> bool:
+        """With a print preview requested, the frame on screen shows it (it is built in the background)."""
+        w = self.window
+        if w.toolpaths_spec is None:
+            return True
+        shown = w.last_shown
+        info = None if shown is None else getattr(shown.result, "extra", {}).get("toolpaths")
+        return info is not None and info.get("gen") == w.toolpaths_gen
+
     def _painted(self, _index: int) -> None:
+        if not self._toolpaths_drawn():
+            return
         if self.exit_code is None and self._ended_seen:
             self._ended()
             return
@@ -92,8 +103,12 @@ class ScreenshotRun:
 
 
 def run_gui(source: str | None = None, model: str | None = None, frames: int | None = None,
-            screenshot: str | None = None, settings=None) -> int:
-    """Open the window; with `frames`, run that many frames, save `screenshot` (when given) and return."""
+            screenshot: str | None = None, settings=None, toolpaths: str | None = None, printer: str | None = None,
+            layer: int | None = None) -> int:
+    """Open the window; with `frames`, run that many frames, save `screenshot` (when given) and return.
+
+    toolpaths: a G-code file shown on the printer bed (the print preview), placed by the printer profile
+    `printer` (its bed anchor is the source's first anchor); layer: show layers up to this one (0-based)."""
     if frames is not None and not source:
         raise ValueError("--frames needs --source (a recording, a video or a camera)")
     ensure_platform()
@@ -106,6 +121,10 @@ def run_gui(source: str | None = None, model: str | None = None, frames: int | N
 
         warm_up()
     window.show()
+    if toolpaths:
+        from arapp.gui.toolpaths import preview_spec
+
+        window.set_toolpaths(preview_spec(toolpaths, printer, layer))
     if model:
         window.open_model(model)
     if source:

@@ -88,6 +88,10 @@ class MainWindow(QMainWindow):
         self.latency_ms = 0.0
         self._print_dialog = None
         self._model_task: Task | None = None
+        # the print preview on the bed: the request (arapp.gui.toolpaths.preview_spec) and what the view drew
+        self.toolpaths_spec: dict | None = None
+        self.toolpaths_gen = 0
+        self.toolpaths_info: dict | None = None
 
         self.view = VideoView()
         self.view.painted.connect(self._painted)
@@ -257,6 +261,7 @@ class MainWindow(QMainWindow):
         engine.frame_ready.connect(self._frame_ready)
         engine.error.connect(self.show_error)
         engine.ended.connect(self._ended)
+        engine.toolpaths_shown.connect(self._toolpaths_shown)
         self.engine = engine
         r = self.view.devicePixelRatioF()
         engine.set_display_size(int(self.view.width() * r), int(self.view.height() * r))
@@ -269,6 +274,8 @@ class MainWindow(QMainWindow):
         self._push_model_state()
         if self.highlight is not None:
             engine.set_highlight(self.highlight)
+        if self.toolpaths_spec is not None:
+            engine.set_toolpaths(self.toolpaths_spec, self.toolpaths_gen)
         self.replay.set_playing(True)
         self._remember("recent_sources", spec)
 
@@ -573,6 +580,11 @@ class MainWindow(QMainWindow):
 
     # -- printing ------------------------------------------------------------------------
     def open_print_dialog(self) -> None:
+        old = self._print_dialog
+        if old is not None and old.printing:
+            old.show()  # a print is running: its dialog, not a new one
+            old.raise_()
+            return
         if self.model is None:
             self.show_error("Nothing to print", "Open a model first (Model panel or File > Open model)")
             return
@@ -580,8 +592,28 @@ class MainWindow(QMainWindow):
 
         dlg = PrintDialog(self.model, self.placement, settings=self.settings, parent=self)
         dlg.error.connect(self.show_error)
+        dlg.preview_changed.connect(self.set_toolpaths)
         self._print_dialog = dlg
         dlg.open()
+
+    def set_toolpaths(self, spec: dict | None) -> None:
+        """Show the print preview `spec` (arapp.gui.toolpaths.preview_spec: G-code, printer profile, layer,
+        layer being printed) on the bed in the live view; None clears it. Built in the engine, off this thread."""
+        self.toolpaths_gen += 1
+        self.toolpaths_spec = None if spec is None else dict(spec)
+        if self.engine is not None:
+            self.engine.set_toolpaths(self.toolpaths_spec, self.toolpaths_gen)
+
+    def _toolpaths_shown(self, info: dict) -> None:
+        if self.sender() is not self.engine:
+            return  # a closed source's engine
+        self.toolpaths_info = info
+        dlg = self._print_dialog
+        if dlg is not None and info.get("layers"):
+            dlg.preview_shown(info)
+        if info.get("outside"):
+            self.statusBar().showMessage("Print preview: the part leaves the build area (drawn red on the bed)",
+                                         10000)
 
     # -- settings, recent files, drag and drop -----------------------------------------------
     def _recent(self, key: str) -> list[str]:

@@ -1,5 +1,12 @@
-"""The print dialog: the model as placed on screen -> slice (worker thread, progress, cancel) -> save G-code
-or send it to a printer (serial port or OctoPrint) with progress, temperatures and cancel."""
+"""The print dialog: the model as placed on screen -> slice (worker thread, progress, cancel) -> preview the
+toolpaths on the real printer bed in the AR view (layer slider, build-area warning) -> save the G-code or
+send it to a printer (serial port or OctoPrint) with progress, layer, ETA, temperatures, pause/resume/cancel.
+
+The dialog never talks to the live view's engine itself: it emits
+`preview_changed(spec | None)` (arapp.gui.toolpaths.preview_spec) and
+`progress_reported(Progress)`; the main window forwards the spec to the engine.
+During a print the spec's `current` layer follows the link's progress reports.
+"""
 
 from __future__ import annotations
 
@@ -8,9 +15,10 @@ import time
 from collections import deque
 from pathlib import Path
 
-from PySide6.QtCore import QPointF, Qt, Signal
+from PySide6.QtCore import QPointF, QStandardPaths, Qt, Signal
 from PySide6.QtGui import QColor, QPainter, QPen, QPolygonF
 from PySide6.QtWidgets import (
+    QCheckBox,
     QComboBox,
     QDialog,
     QDoubleSpinBox,
@@ -23,6 +31,7 @@ from PySide6.QtWidgets import (
     QProgressBar,
     QPushButton,
     QRadioButton,
+    QSlider,
     QSpinBox,
     QVBoxLayout,
     QWidget,
@@ -46,8 +55,18 @@ class TemperatureGraph(QWidget):
         self.setMinimumHeight(110)
 
     def add(self, temps: dict, t: float | None = None) -> None:
-        """temps: {"hotend": (actual, target), "bed": (actual, target)} in degrees C (missing keys allowed)."""
-        self.samples.append((time.monotonic() if t is None else t, dict(temps)))
+        """temps: {"hotend": (actual, target), "bed": (actual, target)} in degrees C (missing keys allowed,
+        a target may be None)."""
+        if not temps:
+            return
+        t = time.monotonic() if t is None else t
+        if self.samples and t - self.samples[-1][0] < 0.5 and self.samples[-1][1] == temps:
+            return  # the link reports up to 10 times a second; unchanged readings add nothing
+        self.samples.append((t, dict(temps)))
+        self.update()
+
+    def clear(self) -> None:
+        self.samples.clear()
         self.update()
 
     def paintEvent(self, event):  # noqa: N802
@@ -60,12 +79,14 @@ class TemperatureGraph(QWidget):
             p.drawText(self.rect(), Qt.AlignmentFlag.AlignCenter, "temperatures appear while printing")
             return
         t_end = self.samples[-1][0]
+        # the time axis spans the samples so far, up to span_s (a fresh print fills the width)
+        span = max(1.0, min(self.span_s, t_end - self.samples[0][0]))
         values = [v for _, d in self.samples for pair in d.values() for v in pair if v is not None]
         top = max(50.0, max(values) * 1.1 if values else 50.0)
         w, h = self.width() - 40, self.height() - 8
 
         def xy(t, v):
-            return QPointF(36 + w * (1 - (t_end - t) / self.span_s), 4 + h * (1 - v / top))
+            return QPointF(36 + w * (1 - (t_end - t) / span), 4 + h * (1 - v / top))
 
         p.setPen(QColor(120, 120, 130))
         p.drawText(2, 14, f"{top:.0f}")
@@ -73,14 +94,30 @@ class TemperatureGraph(QWidget):
         for name, colour in self.SERIES.items():
             for k, style in ((0, Qt.PenStyle.SolidLine), (1, Qt.PenStyle.DashLine)):
                 pts = [xy(t, d[name][k]) for t, d in self.samples
-                       if name in d and d[name][k] is not None and t_end - t <= self.span_s]
+                       if name in d and d[name][k] is not None and t_end - t <= span]
                 if len(pts) >= 2:
                     p.setPen(QPen(colour, 1.6, style))
                     p.drawPolyline(QPolygonF(pts))
         last = self.samples[-1][1]
-        text = "   ".join(f"{n} {a:.0f}/{tg:.0f} °C" for n, (a, tg) in last.items() if a is not None and tg is not None)
+        text = "   ".join(f"{n} {a:.0f}" + (f"/{tg:.0f}" if tg is not None else "") + " °C"
+                           for n, (a, tg) in last.items() if a is not None)
         p.setPen(QColor(40, 40, 50))
         p.drawText(40, 16, text)
+
+
+KEEP_SLICES = 10
+
+
+def prune_slices(folder: Path, keep: int = KEEP_SLICES) -> None:
+    """Delete all but the newest `keep` sliced G-code files in `folder` that no print job refers to (a file
+    with a .printjob.json beside it may be needed to resume a print, so it stays)."""
+    loose = [p for p in folder.glob("*.gcode") if not p.with_suffix(".printjob.json").exists()]
+    loose.sort(key=lambda p: p.stat().st_mtime, reverse=True)
+    for p in loose[keep:]:
+        try:
+            p.unlink()
+        except OSError:
+            pass  # in use or already gone: harmless, tried again next time
 
 
 class PrintDialog(QDialog):
@@ -93,6 +130,9 @@ class PrintDialog(QDialog):
     error = Signal(str, str)
     sliced = Signal(object)
     solid_ready = Signal(object)
+    preview_changed = Signal(object)  # arapp.gui.toolpaths.preview_spec dict, or None: no preview
+    progress_reported = Signal(object)  # arapp.printing.link.Progress, on the UI thread
+    print_finished = Signal(object)  # the final printlink.PrintEvent
 
     def __init__(self, model, placement: dict | None, settings=None, parent=None):
         super().__init__(parent)
@@ -104,9 +144,18 @@ class PrintDialog(QDialog):
         self.settings = settings
         self.solid = None
         self.result = None
-        self.gcode_path: str | None = None
+        self.gcode_path: str | None = None  # where the user saved the G-code
+        self.job_gcode_path: str | None = None  # the copy the preview and the printer job read
+        self.summary = None  # arapp.gui.toolpaths.PreviewSummary of the sliced G-code
+        self.sliced_profile: str | None = None  # profile name or path the G-code was sliced for
+        self.work_dir = Path(QStandardPaths.writableLocation(QStandardPaths.StandardLocation.AppDataLocation)
+                             or Path.home() / ".arapp") / "print-jobs"
         self._slice_task: Task | None = None
         self._job = None
+        self.current_layer = -1  # the layer being printed, from the link's reports
+        self.last_progress = None
+        self.preview_gen = 0
+        self.preview_spec: dict | None = None
 
         from arapp.printing import MATERIALS
         from arapp.printing.profile import shipped_profiles
@@ -163,6 +212,30 @@ class PrintDialog(QDialog):
         form.addRow(self.slice_label)
         lay.addWidget(box)
 
+        prev = QGroupBox("Print preview on the bed (AR view)")
+        pf = QVBoxLayout(prev)
+        self.preview_check = QCheckBox("Show the toolpaths on the printer bed")
+        self.preview_check.setEnabled(False)
+        self.preview_check.toggled.connect(self._preview_toggled)
+        pf.addWidget(self.preview_check)
+        lrow = QHBoxLayout()
+        self.layer_slider = QSlider(Qt.Orientation.Horizontal)
+        self.layer_slider.setRange(0, 0)
+        self.layer_slider.setEnabled(False)
+        self.layer_slider.valueChanged.connect(self._layer_changed)
+        self.layer_label = QLabel("slice first")
+        self.layer_label.setMinimumWidth(170)
+        lrow.addWidget(QLabel("Layer"))
+        lrow.addWidget(self.layer_slider, 1)
+        lrow.addWidget(self.layer_label)
+        pf.addLayout(lrow)
+        self.preview_warning = QLabel("")
+        self.preview_warning.setWordWrap(True)
+        self.preview_warning.setStyleSheet("color: #c01010; font-weight: bold")
+        self.preview_warning.setVisible(False)
+        pf.addWidget(self.preview_warning)
+        lay.addWidget(prev)
+
         send = QGroupBox("Send to printer")
         sf = QFormLayout(send)
         self.use_serial = QRadioButton("USB serial")
@@ -190,16 +263,29 @@ class PrintDialog(QDialog):
         self.send_button = QPushButton("Print")
         self.send_button.setEnabled(False)
         self.send_button.clicked.connect(self.start_print)
+        self.pause_button = QPushButton("Pause")
+        self.pause_button.setEnabled(False)
+        self.pause_button.clicked.connect(self.toggle_pause)
         self.cancel_print_button = QPushButton("Cancel print")
         self.cancel_print_button.setEnabled(False)
         self.cancel_print_button.clicked.connect(self.cancel_print)
         row2.addWidget(self.send_button)
+        row2.addWidget(self.pause_button)
         row2.addWidget(self.cancel_print_button)
         sf.addRow(row2)
         self.print_progress = QProgressBar()
         self.print_progress.setRange(0, 1000)
+        self.print_progress.setFormat("%p %")
         sf.addRow(self.print_progress)
+        stats = QHBoxLayout()
+        self.percent_label = QLabel("")
+        self.print_layer_label = QLabel("")
+        self.eta_label = QLabel("")
+        for w in (self.percent_label, self.print_layer_label, self.eta_label):
+            stats.addWidget(w, 1)
+        sf.addRow(stats)
         self.print_label = QLabel("")
+        self.print_label.setWordWrap(True)
         sf.addRow(self.print_label)
         self.temps = TemperatureGraph()
         sf.addRow(self.temps)
@@ -244,6 +330,16 @@ class PrintDialog(QDialog):
                 self.profile.setCurrentIndex(0)
             else:
                 self.profile.setCurrentIndex(0)
+
+    def set_profile_path(self, path: str) -> None:
+        """Use the printer profile file at `path` (as 'Other profile file...' does)."""
+        path = str(path)
+        idx = self.profile.findText(path)
+        if idx < 0:
+            self.profile.insertItem(0, path)
+            idx = 0
+        self._profile_path = path
+        self.profile.setCurrentIndex(idx)
 
     def load_profile(self):
         from arapp.printing import load_profile
@@ -304,6 +400,9 @@ class PrintDialog(QDialog):
         self.slice_label.setText("Slicing...")
         model, matrix = self.model, self.model_to_placement_mm()
         cancel = threading.Event()
+        profile_name = self.profile.currentText()
+        stem = "".join(c if c.isalnum() or c in "-_" else "_" for c in str(getattr(model, "name", "model")))
+        job_gcode = self.work_dir / f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}.gcode"
 
         def work():
             from arapp.printing import placed_solid
@@ -317,7 +416,17 @@ class PrintDialog(QDialog):
                     last[0] = now
                     on_ui(self._slice_progress, f, self)
 
-            return slice_mesh(solid, settings, profile, progress=progress, cancel=cancel)
+            result = slice_mesh(solid, settings, profile, progress=progress, cancel=cancel)
+            # The copy the preview (in the pipeline process) and the printer job read; written here, off the UI
+            # thread, with the summary the dialog shows (layers, moves outside the build area).
+            from arapp.gui.toolpaths import summarize
+            from arapp.printing.gcode import parse_gcode
+
+            job_gcode.parent.mkdir(parents=True, exist_ok=True)
+            job_gcode.write_text(result.gcode)
+            prune_slices(job_gcode.parent)
+            summary = summarize(parse_gcode(result.gcode), profile.bed)
+            return result, str(job_gcode), summary, profile, profile_name
 
         self._slice_task = Task(work, done=self._slice_done, failed=self._slice_failed, name="arapp-slice",
                                 owner=self)
@@ -336,9 +445,10 @@ class PrintDialog(QDialog):
         self.slice_button.setEnabled(True)
         self.cancel_slice_button.setEnabled(False)
 
-    def _slice_done(self, result) -> None:
+    def _slice_done(self, done) -> None:
         from arapp.printing.gcode import format_duration
 
+        result, self.job_gcode_path, self.summary, profile, self.sliced_profile = done
         self._slice_finished()
         self.result = result
         self.slice_progress.setValue(1000)
@@ -346,7 +456,8 @@ class PrintDialog(QDialog):
         self.slice_label.setText(f"{result.layers} layers, about {format_duration(result.print_time_s)}, "
                                  f"{result.filament_mm / 1000:.2f} m of filament ({result.filament_g:.1f} g){scale}")
         self.save_button.setEnabled(True)
-        self.send_button.setEnabled(True)
+        self.send_button.setEnabled(self._job is None)
+        self._setup_preview(profile)
         self.sliced.emit(result)
 
     def _slice_failed(self, exc: BaseException) -> None:
@@ -377,6 +488,84 @@ class PrintDialog(QDialog):
         self.slice_label.setText(self.slice_label.text() + f"\nSaved {path}")
         return path
 
+    # -- the print preview on the bed ------------------------------------------------------
+    def _setup_preview(self, profile) -> None:
+        """After slicing: the layer slider spans the layers (its last position: all layers), warnings shown."""
+        n = self.summary.layers if self.summary is not None else 0
+        self.layer_slider.blockSignals(True)
+        self.layer_slider.setRange(0, max(0, n))  # 0..n-1: one layer; n: all layers
+        self.layer_slider.setValue(n)
+        self.layer_slider.blockSignals(False)
+        warnings = []
+        if self.summary is not None:
+            w = self.summary.warning(profile.bed)
+            if w:
+                warnings.append(w)
+        if profile.bed_from_anchor is None:
+            warnings.append(f"The printer profile {profile.source} has no bed anchor: the preview cannot be placed "
+                            "on the bed (add bed_anchor to the profile, see PRINTER_PROFILE.md).")
+        self.preview_warning.setText("\n".join(warnings))
+        self.preview_warning.setVisible(bool(warnings))
+        can = n > 0 and profile.bed_from_anchor is not None
+        self.preview_check.setEnabled(can)
+        self.layer_slider.setEnabled(can and self._job is None)
+        self._update_layer_label()
+        if self.preview_check.isChecked():
+            self._emit_preview()
+
+    @property
+    def preview_layer(self) -> int | None:
+        """The slider's layer (0-based), None for all layers."""
+        v = self.layer_slider.value()
+        return None if v >= self.layer_slider.maximum() else v
+
+    def _update_layer_label(self) -> None:
+        s = self.summary
+        if s is None or not s.layers:
+            self.layer_label.setText("slice first")
+            return
+        if self.current_layer >= 0 and self._job is not None:
+            k = min(self.current_layer, s.layers - 1)
+            self.layer_label.setText(f"printing layer {k + 1} / {s.layers}, z {s.z[k]:.2f} mm")
+            return
+        k = self.preview_layer
+        if k is None:
+            self.layer_label.setText(f"all {s.layers} layers")
+        else:
+            self.layer_label.setText(f"layer {k + 1} / {s.layers}, z {s.z[k]:.2f} mm")
+
+    def _preview_toggled(self, on: bool) -> None:
+        if on:
+            self._emit_preview()
+        else:
+            self._set_preview(None)
+
+    def _layer_changed(self, _value: int) -> None:
+        self._update_layer_label()
+        if self.preview_check.isChecked():
+            self._emit_preview()
+
+    def _emit_preview(self) -> None:
+        from arapp.gui.toolpaths import preview_spec
+
+        if self.job_gcode_path is None:
+            return
+        current = self.current_layer if (self._job is not None and self.current_layer >= 0) else None
+        self._set_preview(preview_spec(self.job_gcode_path, self.sliced_profile, self.preview_layer, current))
+
+    def _set_preview(self, spec: dict | None) -> None:
+        self.preview_gen += 1
+        if spec is not None:
+            spec["gen"] = self.preview_gen
+        self.preview_spec = spec
+        self.preview_changed.emit(spec)
+
+    def preview_shown(self, info: dict) -> None:
+        """The live view drew the preview `info` (arapp.gui.toolpaths); called by the main window."""
+        if info.get("outside") and not self.preview_warning.isVisible():
+            self.preview_warning.setText("Toolpaths leave the build area (drawn red on the bed).")
+            self.preview_warning.setVisible(True)
+
     # -- printing --------------------------------------------------------------------------
     def refresh_ports(self) -> None:
         current = self.port.currentText()
@@ -385,55 +574,125 @@ class PrintDialog(QDialog):
         if current:
             self.port.setCurrentText(current)
 
+    def target(self):
+        """The printer chosen in the dialog (printlink.SerialTarget or OctoPrintTarget)."""
+        if self.use_octoprint.isChecked():
+            return printlink.OctoPrintTarget(self.octoprint_url.text().strip(), self.api_key_file.text().strip())
+        text = self.baud.currentText()
+        try:
+            baud = int(text)
+        except ValueError:
+            raise ValueError(f"baud rate must be a whole number, got {text!r}") from None
+        return printlink.SerialTarget(self.port.currentText().strip(), baud)
+
     def start_print(self) -> None:
-        if self.result is None:
+        if self.result is None or self._job is not None:
             return
         self._save_settings()
-        if self.use_octoprint.isChecked():
-            target = printlink.OctoPrintTarget(self.octoprint_url.text().strip(), self.api_key_file.text().strip())
-        else:
-            try:
-                baud = int(self.baud.currentText())
-            except ValueError:
-                text = self.baud.currentText()
-                self._fail("Cannot print", ValueError(f"baud rate must be a whole number, got {text!r}"))
-                return
-            target = printlink.SerialTarget(self.port.currentText().strip(), baud)
+        gcode = self.result.gcode
+        job_path = None
+        if self.job_gcode_path is not None:
+            job_path = str(Path(self.job_gcode_path).with_suffix(".printjob.json"))
         try:
+            target = self.target()
             profile = self.load_profile()
-            self._job = printlink.start_job(target, self.result.gcode, profile, self._print_event)
+            self._job = printlink.start_job(target, gcode, profile, self._print_event, job_path=job_path,
+                                            gcode_path=self.job_gcode_path or "")
         except (ValueError, OSError, RuntimeError) as exc:
             self._fail("Printer error", exc)
             return
+        self.current_layer = -1
+        self.last_progress = None
+        self.temps.clear()
+        self.print_progress.setValue(0)
+        self.percent_label.setText("0.0 %")
+        self.print_layer_label.setText("")
+        self.eta_label.setText("")
         self.send_button.setEnabled(False)
+        self.slice_button.setEnabled(False)
+        self.pause_button.setEnabled(True)
+        self.pause_button.setText("Pause")
         self.cancel_print_button.setEnabled(True)
+        self._slider_before_print = self.layer_slider.value()
+        self.layer_slider.setEnabled(False)
         self.print_label.setText("Connecting...")
+        if self.preview_check.isEnabled() and not self.preview_check.isChecked():
+            self.preview_check.setChecked(True)  # show the print's progress on the bed
 
     def _print_event(self, event: printlink.PrintEvent) -> None:
         """Called from the link's thread; forwarded to the UI thread."""
         on_ui(self._show_print_event, event, self)
 
-    def _show_print_event(self, ev) -> None:
-        if ev.fraction is not None:
-            self.print_progress.setValue(int(1000 * ev.fraction))
-        if ev.temperatures:
-            self.temps.add(ev.temperatures)
+    def _show_print_event(self, ev: printlink.PrintEvent) -> None:
+        pr = ev.progress
+        if pr is not None:
+            self.last_progress = pr
+            self.print_progress.setValue(int(round(10 * max(0.0, min(100.0, pr.percent)))))
+            self.percent_label.setText(f"{pr.percent:.1f} %")
+            self.print_layer_label.setText(printlink.layer_text(pr))
+            self.eta_label.setText(f"ETA {printlink.format_duration_s(pr.eta_s)}" if pr.eta_s is not None else "")
+            self.temps.add(printlink.temperatures(pr))
+            if pr.layer != self.current_layer:
+                # the highlight follows the printer's acknowledged lines, as the link reports them
+                self.current_layer = pr.layer
+                if pr.layer >= 0:
+                    self.layer_slider.blockSignals(True)  # the slider shows the printed layer (disabled meanwhile)
+                    self.layer_slider.setValue(min(pr.layer, self.layer_slider.maximum()))
+                    self.layer_slider.blockSignals(False)
+                self._update_layer_label()
+                if self.preview_check.isChecked() and pr.layer >= 0 and self._job is not None:
+                    self._emit_preview()
+            self.progress_reported.emit(pr)
         if ev.text:
             self.print_label.setText(ev.text)
+        if ev.error:
+            message = ev.error
+            if ev.job_path and str(ev.job_path) not in message:
+                message += f"\n\nThe job state is saved in {ev.job_path}; resume with: arapp print --resume {ev.job_path}"
+            self._fail(ev.error_title or "Printer error", RuntimeError(message))
         if ev.finished:
-            self.send_button.setEnabled(True)
-            self.cancel_print_button.setEnabled(False)
             self._job = None
-            if ev.error:
-                self._fail("Printer error", RuntimeError(ev.error))
+            self.send_button.setEnabled(self.result is not None)
+            self.slice_button.setEnabled(True)
+            self.pause_button.setEnabled(False)
+            self.pause_button.setText("Pause")
+            self.cancel_print_button.setEnabled(False)
+            self.layer_slider.setEnabled(self.preview_check.isEnabled())
+            self.layer_slider.blockSignals(True)
+            self.layer_slider.setValue(getattr(self, "_slider_before_print", self.layer_slider.maximum()))
+            self.layer_slider.blockSignals(False)
+            if self.preview_check.isChecked():
+                self._emit_preview()  # back to the slider's layer
+            self._update_layer_label()
+            self.print_finished.emit(ev)
+
+    def toggle_pause(self) -> None:
+        job = self._job
+        if job is None:
+            return
+        if job.paused:
+            job.resume()
+            self.pause_button.setText("Pause")
+            self.print_label.setText("Resuming...")
+        else:
+            job.pause()
+            self.pause_button.setText("Resume")
+            self.print_label.setText("Pausing after the lines in flight (heaters stay on)...")
 
     def cancel_print(self) -> None:
         if self._job is not None:
             self._job.cancel()
+            self.pause_button.setEnabled(False)
             self.print_label.setText("Cancelling (heaters off, nozzle lifted)...")
+
+    @property
+    def printing(self) -> bool:
+        return self._job is not None
 
     def done(self, r: int) -> None:  # noqa: D401 - Qt's name
         if self._slice_task is not None and self._slice_task.running:
             self._slice_task.cancel.set()
         self._save_settings()
+        if self._job is None and self.preview_check.isChecked():
+            self.preview_check.setChecked(False)  # closing the dialog ends the preview (not a running print's)
         super().done(r)

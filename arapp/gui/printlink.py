@@ -1,14 +1,17 @@
-"""The print dialog's view of the printer links in arapp.printing.link: one job API for serial and OctoPrint.
+"""The print dialog's use of the printer links (arapp.printing.link): one job API for serial and OctoPrint.
 
-A job runs in its own thread and reports `PrintEvent`s through a callback
-(called in that thread; the dialog forwards them to the UI thread).
+A `PrintJob` runs `connect()` and `print_gcode()` of a `SerialPrinter` or an
+`OctoPrintLink` in its own thread and reports `PrintEvent`s through a callback
+called in that thread (the dialog forwards them to the UI thread). Pause,
+resume and cancel never block the caller: OctoPrint's are HTTP requests, so
+they run in a short-lived thread of their own.
 """
 
 from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 
 @dataclass
@@ -25,15 +28,21 @@ class OctoPrintTarget:
 
 @dataclass
 class PrintEvent:
-    """Progress of a print: fraction 0..1, layer, text for the status line, temperatures
-    {"hotend": (actual, target), "bed": (actual, target)}; finished (with error text on failure)."""
+    """One report of a print job.
 
-    fraction: float | None = None
-    layer: int | None = None
+    progress: the link's `arapp.printing.link.Progress` (None for connection
+    notes and the final event of a job that failed before printing); text: a
+    line for the dialog; finished: the job is over (done, cancelled or
+    failed); error_title/error: why it failed (for a halt, the printer's own
+    message); job_path: the saved job state to resume from, when there is one.
+    """
+
+    progress: object | None = None
     text: str = ""
-    temperatures: dict = field(default_factory=dict)
     finished: bool = False
+    error_title: str = ""
     error: str | None = None
+    job_path: str | None = None
 
 
 def serial_ports() -> list[str]:
@@ -46,85 +55,177 @@ def serial_ports() -> list[str]:
     return sorted(ports, key=lambda d: (not ("USB" in d or "ACM" in d), d))
 
 
-def start_job(target, gcode: str, profile, callback) -> "PrintJob":
-    """Start printing `gcode` on `target`; callback(PrintEvent) from the job's thread. Raises ValueError/OSError/
-    RuntimeError with the link's own message when the printer cannot be reached."""
-    job = PrintJob(target, gcode, profile, callback)
+def format_duration_s(seconds: float | None) -> str:
+    """'1 h 05 min', '12 min', '40 s'; '?' when unknown."""
+    if seconds is None:
+        return "?"
+    s = max(0, int(round(seconds)))
+    if s >= 3600:
+        return f"{s // 3600} h {s % 3600 // 60:02d} min"
+    if s >= 60:
+        return f"{s // 60} min {s % 60:02d} s" if s < 600 else f"{s // 60} min"
+    return f"{s} s"
+
+
+def layer_text(progress) -> str:
+    """'layer 3 / 27' (1-based for people), or '' before the first layer."""
+    if progress is None or progress.layer < 0:
+        return ""
+    total = f" / {progress.layer_count}" if progress.layer_count else ""
+    return f"layer {progress.layer + 1}{total}"
+
+
+def progress_text(progress) -> str:
+    """The status line of a Progress: state, percent, layer, lines, elapsed and ETA, the printer's message."""
+    parts = [progress.state, f"{progress.percent:.1f} %"]
+    lt = layer_text(progress)
+    if lt:
+        parts.append(lt)
+    parts.append(f"line {progress.lines_done} / {progress.lines_total}")
+    parts.append(f"elapsed {format_duration_s(progress.elapsed_s)}")
+    if progress.eta_s is not None:
+        parts.append(f"ETA {format_duration_s(progress.eta_s)}")
+    if progress.message:
+        parts.append(progress.message)
+    return "   ".join(parts)
+
+
+def temperatures(progress) -> dict:
+    """{"hotend": (actual, target), "bed": (actual, target)} in degrees C from a Progress ("T"/"B"); a target
+    the printer did not report is None."""
+    out = {}
+    for key, name in (("T", "hotend"), ("B", "bed")):
+        if key in (progress.temperatures or {}):
+            actual, target = progress.temperatures[key]
+            out[name] = (None if actual is None else float(actual), None if target is None else float(target))
+    return out
+
+
+def make_link(target, profile=None, job_path=None):
+    """The link object for a target (not connected yet). Raises ValueError for a target the user left
+    incomplete, ApiKeyError/OSError for an unreadable key file."""
+    if isinstance(target, OctoPrintTarget):
+        from arapp.printing.link.octoprint import OctoPrintLink, load_api_key
+
+        if not target.url:
+            raise ValueError("give the OctoPrint URL (e.g. http://octopi.local) and the API key file")
+        if not target.api_key_file:
+            raise ValueError("give the file holding OctoPrint's API key (Settings > API in OctoPrint)")
+        return OctoPrintLink(target.url, load_api_key(target.api_key_file), job_path=job_path)
+    from arapp.printing.link.serial_link import SerialPrinter
+
+    if not target.port:
+        raise ValueError("choose the printer's serial port (e.g. /dev/ttyUSB0), or use OctoPrint")
+    bed_height = getattr(getattr(profile, "bed", None), "height", None)
+    return SerialPrinter(target.port, target.baud, bed_height=bed_height, job_path=job_path)
+
+
+def start_job(target, gcode: str, profile, callback, *, job_path=None, gcode_path: str = "") -> "PrintJob":
+    """Start printing `gcode` on `target`; callback(PrintEvent) from the job's thread. Raises ValueError/OSError
+    at once for a target that cannot work (no port, no URL, unreadable key file)."""
+    job = PrintJob(make_link(target, profile, job_path), gcode, callback, job_path=job_path, gcode_path=gcode_path)
     job.start()
     return job
 
 
 class PrintJob:
-    """One print in a worker thread; `cancel()` asks the link to stop safely (heaters off, nozzle lifted)."""
+    """One print on a link, in a worker thread.
 
-    def __init__(self, target, gcode: str, profile, callback):
-        self.target, self.gcode, self.profile, self.callback = target, gcode, profile, callback
+    `pause()`, `resume()` and `cancel()` may be called from any thread and
+    return at once; `cancel()` makes the link stop safely (heaters off, nozzle
+    lifted; OctoPrint runs its own cancel script).
+    """
+
+    def __init__(self, link, gcode: str, callback, *, job_path=None, gcode_path: str = ""):
+        self.link, self.gcode, self.callback = link, gcode, callback
+        self.job_path = None if job_path is None else str(job_path)
+        self.gcode_path = str(gcode_path)
         self._cancel = threading.Event()
+        self._connected = threading.Event()
         self._thread = threading.Thread(target=self._run, name="arapp-print", daemon=True)
-        self._host = None
+        self.paused = False
         self.started = time.monotonic()
+        self.state = None  # the link's final JobState
 
     def start(self) -> None:
-        if isinstance(self.target, SerialTarget) and not self.target.port:
-            raise ValueError("choose the printer's serial port (e.g. /dev/ttyUSB0), or use OctoPrint")
-        if isinstance(self.target, OctoPrintTarget) and not self.target.url:
-            raise ValueError("give the OctoPrint URL (e.g. http://octopi.local) and the API key file")
         self._thread.start()
-
-    def cancel(self) -> None:
-        self._cancel.set()
-        host = self._host
-        if host is not None and hasattr(host, "cancel"):
-            host.cancel()
 
     @property
     def running(self) -> bool:
         return self._thread.is_alive()
 
+    def join(self, timeout: float | None = None) -> None:
+        self._thread.join(timeout)
+
+    # -- controls (any thread, never blocking) ----------------------------------------------
+    def _control(self, name: str) -> None:
+        def call():
+            try:
+                getattr(self.link, name)()
+            except Exception as exc:  # noqa: BLE001 - e.g. OctoPrint unreachable: the dialog shows it
+                self.callback(PrintEvent(text=f"{name} failed", error_title=f"Cannot {name} the print",
+                                         error=str(exc) or type(exc).__name__))
+
+        threading.Thread(target=call, name=f"arapp-print-{name}", daemon=True).start()
+
+    def pause(self) -> None:
+        """Stop sending after the lines in flight (heaters stay on)."""
+        if self._connected.is_set() and not self._cancel.is_set():
+            self.paused = True
+            self._control("pause")
+
+    def resume(self) -> None:
+        if self._connected.is_set() and not self._cancel.is_set():
+            self.paused = False
+            self._control("resume")
+
+    def cancel(self) -> None:
+        # print_gcode watches the event (both links); the serial link's own cancel() only sets a flag and
+        # wakes it at once. OctoPrint's is an HTTP request that print_gcode makes itself on the event.
+        self._cancel.set()
+        from arapp.printing.link.serial_link import SerialPrinter
+
+        if self._connected.is_set() and isinstance(self.link, SerialPrinter):
+            self.link.cancel()
+
+    # -- the job thread ---------------------------------------------------------------------
     def _run(self) -> None:
-        try:
-            self._run_link()
-        except Exception as exc:  # noqa: BLE001 - the printer's message goes to the dialog
-            self.callback(PrintEvent(text="Print stopped", finished=True, error=str(exc) or type(exc).__name__))
-            return
-        self.callback(PrintEvent(fraction=None if self._cancel.is_set() else 1.0,
-                                 text="Cancelled" if self._cancel.is_set() else "Done", finished=True))
+        from arapp.printing.link import LinkLost, PrinterHalted
 
-    def _on_progress(self, pr) -> None:
-        """A link's Progress -> PrintEvent (temperatures T/B renamed hotend/bed)."""
-        temps = {}
-        for key, name in (("T", "hotend"), ("B", "bed")):
-            if key in pr.temperatures:
-                actual, target = pr.temperatures[key]
-                temps[name] = (actual, target if target is not None else actual)
-        fraction = max(0.0, min(1.0, pr.percent / 100.0))
-        layer = pr.layer + 1 if pr.layer >= 0 else None
-        parts = [f"{pr.percent:.1f} %"]
-        if layer is not None:
-            parts.append(f"layer {layer}" + (f"/{pr.layer_count}" if pr.layer_count else ""))
-        parts.append(f"line {pr.lines_done}/{pr.lines_total}")
-        if pr.eta_s is not None:
-            parts.append(f"ETA {pr.eta_s / 60:.0f} min" if pr.eta_s >= 60 else f"ETA {pr.eta_s:.0f} s")
-        if pr.message:
-            parts.append(pr.message)
-        self.callback(PrintEvent(fraction=fraction, layer=layer, text="  ".join(parts), temperatures=temps))
-
-    def _make_link(self):
-        from arapp.printing.link import OctoPrintLink, SerialPrinter
-
-        bed = getattr(getattr(self.profile, "bed", None), "height", None)
-        if isinstance(self.target, OctoPrintTarget):
-            from arapp.printing.link.octoprint import load_api_key
-
-            return OctoPrintLink(self.target.url, load_api_key(self.target.api_key_file))
-        return SerialPrinter(self.target.port, self.target.baud, bed_height=bed)
-
-    def _run_link(self) -> None:
-        link = self._make_link()
-        self._host = link
-        where = self.target.url if isinstance(self.target, OctoPrintTarget) else self.target.port
+        where = getattr(self.link, "url", None) or getattr(self.link, "port", "the printer")
         self.callback(PrintEvent(text=f"Connecting to {where}..."))
-        with link:
+        try:
+            self.link.connect()
+            self._connected.set()
             if self._cancel.is_set():
+                self.callback(PrintEvent(text="Cancelled before printing", finished=True))
                 return
-            link.print_gcode(self.gcode.splitlines(), progress=self._on_progress, cancel=self._cancel)
+            self.callback(PrintEvent(text=f"Connected to {where}; printing"))
+            self.state = self.link.print_gcode(self.gcode.splitlines(), progress=self._progress,
+                                               cancel=self._cancel, gcode_path=self.gcode_path)
+        except PrinterHalted as exc:
+            self._failed("The printer halted", exc)
+            return
+        except LinkLost as exc:
+            self._failed("Printer connection lost", exc)
+            return
+        except Exception as exc:  # noqa: BLE001 - any link failure goes to the dialog with its message
+            self._failed("Printer error", exc)
+            return
+        finally:
+            try:
+                self.link.close()
+            except Exception:  # noqa: BLE001 - closing a dead port can fail; nothing left to do
+                pass
+        status = getattr(self.state, "status", "done")
+        self.callback(PrintEvent(text="Print cancelled" if status == "cancelled" else "Print finished",
+                                 finished=True, job_path=self.job_path))
+
+    def _failed(self, title: str, exc: BaseException) -> None:
+        job_path = getattr(exc, "job_path", None)
+        self.callback(PrintEvent(text=f"{title}", finished=True, error_title=title,
+                                 error=str(exc) or type(exc).__name__,
+                                 job_path=None if job_path is None else str(job_path)))
+
+    def _progress(self, progress) -> None:
+        self.callback(PrintEvent(progress=progress, text=progress_text(progress)))

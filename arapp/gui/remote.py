@@ -64,7 +64,8 @@ def warm_up() -> None:
 @dataclass
 class RemoteResult:
     """The pipeline's FrameResult as it crosses the process boundary (`image`: full-size composite, only with
-    full_frames). `extra` holds the child's view of the model: mesh_faces, model_gen, mode, resets."""
+    full_frames). `extra` holds the child's view of the model: mesh_faces, model_gen, mode, resets, and `toolpaths`: the print
+    preview drawn (arapp.gui.toolpaths info dict, None before any)."""
 
     index: int
     t: float
@@ -100,13 +101,22 @@ class _Child:
         self.first_ready = False
         self.display_size = display_size
         self.highlight = None
-        self.state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0}
+        self.state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0, "toolpaths": None}
         self.models: dict = {}
+        self.submit_lock = threading.Lock()
         self.stop = threading.Event()
         self.player = Player(self._open, self.captured, speed=speed, loop=loop, playing=False,
                              on_open=self._opened, on_error=self.send_error, on_end=lambda: self.send(("ended",)))
         self.player._steps = 1
         self.pending: list = []
+        from arapp.gui.toolpaths import ToolpathStage
+
+        self.toolpaths = ToolpathStage(self.submit, self._toolpaths_shown, self.send_error)
+
+    def _toolpaths_shown(self, info: dict) -> None:
+        """Pipeline thread: the print preview `info` is drawn from the next frame on."""
+        self.state["toolpaths"] = info
+        self.send(("toolpaths", info))
 
     def send(self, msg, *blobs) -> None:
         with self.lock:
@@ -139,10 +149,11 @@ class _Child:
                               on_ready=self._ready, on_error=self.send_error, skipped=lambda: self.player.skipped)
         processor.display_size = self.display_size
         processor.highlight = self.highlight
-        self.processor = processor
-        for fn in self.pending:
-            processor.submit(fn)
-        self.pending.clear()
+        with self.submit_lock:
+            self.processor = processor
+            for fn in self.pending:
+                processor.submit(fn)
+            self.pending.clear()
         processor.start()
         if info.live and self.autoplay:
             self.player.play()
@@ -163,10 +174,13 @@ class _Child:
                 self.player.play()
 
     def submit(self, fn) -> None:
-        if self.processor is None:
-            self.pending.append(fn)
-        else:
-            self.processor.submit(fn)
+        """fn(pipeline) between frames in the pipeline thread (queued until it exists); any thread."""
+        with self.submit_lock:
+            if self.processor is None:
+                self.pending.append(fn)
+                return
+            processor = self.processor
+        processor.submit(fn)
 
     # -- commands from the UI ------------------------------------------------------------
     def _load(self, path: str, edits: dict):
@@ -239,6 +253,8 @@ class _Child:
                                   mesh_faces=0 if pipe.mesh is None else int(len(pipe.mesh.faces)))
 
             self.submit(set_model)
+        elif kind == "toolpaths":
+            self.toolpaths.request(msg[1], gen=msg[2])
         elif kind == "record_start":
             from arapp.gui import recording
 
@@ -298,6 +314,7 @@ class _Child:
                     blobs.append(memoryview(np.ascontiguousarray(img)).cast("B"))
             self.send(("frame", meta), *blobs)
         self.player.stop()
+        self.toolpaths.stop()
         if self.processor is not None:
             self.processor.stop()
             self.processor.join(5.0)
@@ -335,6 +352,7 @@ class RemoteEngine(QObject):
     error = Signal(str, str)
     ended = Signal()
     recorded = Signal(str)
+    toolpaths_shown = Signal(object)
 
     def __init__(self, spec: str, *, name: str = "", anchors_json: list | None = None, speed: float = 1.0,
                  loop: bool = False, playing: bool = True, full_frames: bool = False, parent=None):
@@ -395,6 +413,8 @@ class RemoteEngine(QObject):
                 self.ended.emit()
             elif kind == "recorded":
                 self.recorded.emit(msg[1])
+            elif kind == "toolpaths":
+                self.toolpaths_shown.emit(msg[1])
         if not self._stopping:
             self.process.join(2.0)
             code = self.process.exitcode
@@ -422,7 +442,7 @@ class RemoteEngine(QObject):
             image = np.frombuffer(full[0], np.uint8).reshape(shape)
             frame = np.frombuffer(full[1], np.uint8).reshape(shape)
         pose = None if meta["pose"] is None else np.asarray(meta["pose"], float)
-        extra = {k: meta[k] for k in ("mesh_faces", "model_gen", "mode", "resets")}
+        extra = {k: meta[k] for k in ("mesh_faces", "model_gen", "mode", "resets", "toolpaths")}
         result = RemoteResult(meta["index"], meta["t"], pose, meta["state"], meta["markers"], meta["inliers"],
                               meta["ms_track"], meta["ms_render"], image, extra)
         self.shown.put(Shown(result, q, frame, meta["captured_at"], meta["processed_at"],
@@ -485,6 +505,12 @@ class RemoteEngine(QObject):
 
     def set_mode(self, mode: str) -> None:
         self._send("mode", mode)
+
+    def set_toolpaths(self, spec: dict | None, gen: int = 0) -> None:
+        """Show the print preview `spec` (arapp.gui.toolpaths.preview_spec: G-code path, printer profile,
+        layer, layer being printed) on the bed; None clears it. The child parses and builds the line sets;
+        `toolpaths_shown(info)` follows once they are drawn."""
+        self._send("toolpaths", None if spec is None else dict(spec), int(gen))
 
     def reset(self) -> None:
         self._send("reset")

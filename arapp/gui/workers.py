@@ -529,6 +529,7 @@ class Engine(QObject):
     error = Signal(str, str)
     ended = Signal()
     recorded = Signal(str)
+    toolpaths_shown = Signal(object)
 
     def __init__(self, opener: Callable[[], Any], pipeline_factory: Callable[[Any, SourceInfo], Any], *,
                  name: str = "", default_anchors: list | None = None, speed: float = 1.0, loop: bool = False,
@@ -550,11 +551,12 @@ class Engine(QObject):
         self._autoplay = playing
         self._first_ready = False
         self.display_size: tuple[int, int] | None = None
-        self.model_state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0}
+        self.model_state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0, "toolpaths": None}
         self._highlight = None
         self.player = Player(opener, self.captured, speed=speed, loop=loop, playing=False, on_demand=on_demand,
                              on_open=self._on_open, on_error=self.error.emit, on_end=self.ended.emit)
         self.player._steps = 1
+        self._toolpaths = None  # arapp.gui.toolpaths.ToolpathStage, made on the first preview request
 
     # -- lifecycle ---------------------------------------------------------------------
     def start(self) -> None:
@@ -595,6 +597,8 @@ class Engine(QObject):
     def stop(self, wait: float = 0.0) -> None:
         """Ask both threads to finish (they close the source and the pipeline themselves); optionally join."""
         self.player.stop()
+        if self._toolpaths is not None:
+            self._toolpaths.stop()
         with self._lock:
             processor = self.processor
         if processor is not None:
@@ -666,6 +670,19 @@ class Engine(QObject):
             self.model_state["mode"] = mode
 
         self.submit(apply)
+
+    def set_toolpaths(self, spec: dict | None, gen: int = 0) -> None:
+        """Show the print preview `spec` (arapp.gui.toolpaths.preview_spec) on the bed; None clears it.
+        Built in a worker thread; `toolpaths_shown(info)` follows once drawn."""
+        if self._toolpaths is None:
+            from arapp.gui.toolpaths import ToolpathStage
+
+            def shown(info):
+                self.model_state["toolpaths"] = info
+                self.toolpaths_shown.emit(info)
+
+            self._toolpaths = ToolpathStage(self.submit, shown, self.error.emit)
+        self._toolpaths.request(spec, gen=gen)
 
     def reset(self) -> None:
         def apply(p):
