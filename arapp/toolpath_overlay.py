@@ -21,7 +21,7 @@ KIND_COLOURS = {
     "other": (0.9, 0.9, 0.3, 1.0),
     "travel": (0.6, 0.6, 0.6, 0.35),
 }
-DIM_ALPHA = 0.25
+DIM_ALPHA = 0.1  # a hundred dimmed layers stacked must not look solid
 CURRENT_COLOUR = (1.0, 0.2, 0.8, 1.0)  # the layer being printed, during a print
 OUT_OF_BED_COLOUR = (1.0, 0.1, 0.1, 1.0)
 BED_OUTLINE_COLOUR = (0.2, 1.0, 0.3, 0.9)
