@@ -138,7 +138,6 @@ class Pipeline:
 
     def process(self, image: np.ndarray, t: float, index: int = 0) -> FrameResult:
         """Track one BGR frame taken at time t (seconds) and, when drawing, composite the overlay."""
-        t0 = time.perf_counter()
         res = self.tracker.process(image, t)
         t1 = time.perf_counter()
         out = self.draw_overlay(image, res.world_from_camera) if self.draw else image

@@ -178,7 +178,7 @@ def naive_gui_run(recording: Path, seconds: float) -> dict:
     from arapp.pipeline import Pipeline
     from tracking.sources import RecordingSource
 
-    app = get_app()
+    get_app()
     src = RecordingSource(recording, realtime=False, loop=True)
     model = load_model(MODEL)
     pipe = Pipeline(src.camera, src.session.anchors, status_line=False)

@@ -66,7 +66,6 @@ def cut_segments(vertices: np.ndarray, faces: np.ndarray, face_edges: np.ndarray
     down = above & ~nxt                           # side descending through the plane
     up_side = np.argmax(up, axis=1)
     down_side = np.argmax(down, axis=1)
-    rows = np.arange(total)
     n_edges = len(edges)
     # Walking a face in winding order, material lies to the left of the
     # segment from the descending side's point to the climbing side's point.
