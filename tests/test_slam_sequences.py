@@ -114,6 +114,22 @@ def test_bad_frames_neither_crash_nor_teleport():
                 assert np.linalg.norm(res.world_from_camera[:3, 3] - gt[:3, 3]) < 0.01
 
 
+@pytest.mark.parametrize("name", ["qr_anchor", "printer_bed"])
+def test_anchors_in_view_carry_the_pose_and_keypoints_run_seldom(name):
+    frames, session = recording(name)
+    with Tracker(session.camera, session.anchors) as tr:
+        extracted = []
+        extract = tr.extractor.extract
+        tr.extractor.extract = lambda gray: extracted.append(1) or extract(gray)
+        r = run_tracker(tr, frames)
+    m = r["metrics"]
+    assert m.tracked_fraction == 1.0 and m.extent_m > 0.1
+    assert m.ate_fraction_of_extent < 0.005           # the accuracy goal
+    assert m.ate_rmse_m < plain_metrics(frames, session).ate_rmse_m
+    # the anchors are in view throughout: ORB work only on the occasional map-keeping frame
+    assert 0 < len(extracted) <= 0.15 * len(frames)
+
+
 def test_map_scale_matches_the_markers():
     frames, session = recording("board_orbit", slice(0, 75))
     cam = session.camera

@@ -8,7 +8,12 @@ Poses are `world_from_camera` 4x4 in the first anchor's frame (metres, OpenCV
 camera axes). States: `marker` (anchors measured this frame and used),
 `slam` (pose from map keypoints only), `lost` (no pose).
 
-Per frame: markers are detected on a worker thread (every frame while lost or
+While the anchors were measured on the last frame, each frame first asks the
+anchor tracker (which re-finds the markers / QR corners where its prediction
+puts them, cheaper than a detector pass): if it measures them, its pose is the
+frame's pose, and keypoint work (ORB, map matching, keyframes) runs only every
+`keypoint_every`-th frame to keep the map growing for when the anchors go.
+Otherwise: markers are detected on a worker thread (every frame while lost or
 while the map is young, else every `marker_every`-th frame) while ORB features
 are extracted; map points are matched by projection from a constant-velocity
 prediction; the pose is a robust joint fit of marker corners and map points
@@ -74,6 +79,11 @@ class Tracker:
     None: never wait.
     klt: between full frames (those with marker detection), follow the last inlier keypoints by
     optical flow instead of detecting and matching ORB features (much cheaper per frame).
+    anchor_first: while the anchors are in view, their tracker's pose (raw for 12+ corners, filtered
+    for a lone marker) is the output, and keypoints are extracted and matched only on every
+    `keypoint_every`-th frame (and when the anchors are not found); a keyframe submitted then is
+    mapped on the next frame (waiting for it), not beside the following cheap frames.
+    False: the joint marker + keypoint fit on every detection frame (the earlier behaviour).
     """
 
     def __init__(self, camera: Camera, anchors: list[AnchorSpec], slam: bool = True, *, marker_every: int = 4,
@@ -81,7 +91,7 @@ class Tracker:
                  max_angular: float = 5.0, blend_frames: int = 8, min_inliers: int = 20, radius: float = 12.0,
                  keyframe_parallax: float = 0.08, corner_weight: float = 4.0, corner_share: float = 1 / 3,
                  filter: bool = True, max_backlog: int | None = 0, max_lag: int | None = 3,
-                 klt: bool = True):
+                 klt: bool = True, anchor_first: bool = True, keypoint_every: int = 10):
         from tracking.anchors import AnchorTracker  # the anchors package is built alongside
 
         if not anchors:
@@ -99,6 +109,8 @@ class Tracker:
         self.max_backlog = max_backlog
         self.max_lag = max_lag
         self.klt = klt
+        self.anchor_first = bool(anchor_first)
+        self.keypoint_every = max(1, int(keypoint_every))
         self._kf_submissions: list[tuple[int, int]] = []   # (frame, mapper request number)
         self.K = camera.K.copy()
         # the anchors' own filter smooths the marker-only frames before the map carries the pose
@@ -130,6 +142,7 @@ class Tracker:
         self._full_tracks = 0
         self._kf_inliers = 0
         self._depth = 0.5
+        self._full_frame = -(10**9)
 
     def reset(self) -> None:
         """Forget the map and the motion; the next frame starts from the anchors."""
@@ -194,7 +207,6 @@ class Tracker:
         """Track one frame (BGR or grey uint8, camera size) taken at time t seconds."""
         t0 = time.perf_counter()
         self._frame += 1
-        self._bound_mapping_lag()
         bgr, gray = self._prepare(image)
         usable = gray is not None
         if usable:
@@ -208,17 +220,44 @@ class Tracker:
 
         young = len(self.map.points) < 60 or len(self.map.keyframes) < 4
         detect = self._since_detect + 1 >= self.marker_every or self._lost > 0 or young or self.motion.last is None
-        if not detect and self.klt:
+        ar = None
+        anchor_first = (self.anchor_first and self._last_state == "marker" and self._lost == 0
+                        and self.motion.last is not None)
+        # Anchor-only frames (below) are a few ms of work: mapping running beside them on the other
+        # thread would stretch every one of them (the GIL), so a keyframe is mapped in one go on the
+        # frame after it instead of spread over the next `max_lag` frames.
+        self._bound_mapping_lag(1 if anchor_first else None)
+        if anchor_first:
+            # Anchors were measured last frame: the anchor tracker re-finds them at their predicted place
+            # (no detector pass, a few ms) and its pose is the most accurate there is. Keypoint
+            # work (ORB, matching, keyframes) runs only every `keypoint_every` frames to grow the map,
+            # or when the anchors are not found.
+            ar = self._anchors.process(gray, t)
+            self._since_detect = 0
+            pose = self._anchor_output(ar) if self._anchor_usable(ar) else None
+            if (pose is not None and self._frame - self._full_frame < self.keypoint_every
+                    and self._plausible(pose, self.motion.last, t)):
+                self._tracks = None   # flow restarts from the next full frame
+                return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, int(ar.markers),
+                                    int(ar.inliers), t, t0)
+            detect = False
+        elif not detect and self.klt:
             res = self._klt_frame(gray, t, t0)
             if res is not None:
                 self._since_detect += 1
                 return res
-        fut = self._pool.submit(self._anchors.process, bgr, t) if detect else None
+        self._full_frame = self._frame
+        fut = self._pool.submit(self._anchors.process, gray, t) if detect else None
         # while the map is young, features are only needed on frames that may become keyframes
-        need_feats = not (young and detect) or self._frame - self._kf_frame >= 5 or len(self.map.keyframes) == 0
+        # (and always when the anchors were just lost: the map has to take over on this very frame)
+        need_feats = (not (young and (detect or ar is not None)) or self._frame - self._kf_frame >= 5
+                      or len(self.map.keyframes) == 0 or (ar is not None and not self._anchor_usable(ar)))
         feats = self.extractor.extract(gray) if need_feats else Features.empty()
-        ar = fut.result() if fut is not None else None
-        self._since_detect = 0 if detect else self._since_detect + 1
+        if fut is not None:
+            ar = fut.result()
+            self._since_detect = 0
+        elif ar is None:
+            self._since_detect += 1
 
         anchor_pose = None
         corners_w = np.zeros((0, 3))
@@ -258,7 +297,13 @@ class Tracker:
                 p, cin, _ = refine_pose(self.K, anchor_pose, corners_w, corners_uv)
                 min_ = np.zeros(pi.size, bool)
             pose, state = p, "marker"
-            if min_.sum() < self.min_inliers and ar.world_from_camera is not None and len(corners_w) < 12:
+            if (self.anchor_first and self._anchor_usable(ar)
+                    and (self._lost > 0 or self._plausible(self._anchor_output(ar), self.motion.last, t))):
+                # the anchors' pose is what is shown while they are in view (a jump the motion cannot
+                # explain is left to the joint fit); the fit above places this frame in the map
+                source = "anchors"
+                out_pose = self._anchor_output(ar)
+            elif min_.sum() < self.min_inliers and ar.world_from_camera is not None and len(corners_w) < 12:
                 # the map does not help yet and one marker's pose is noisy: the anchors' filtered pose
                 # (a board's many corners are precise as they are; its filter would only add lag)
                 source = "anchors"
@@ -341,10 +386,23 @@ class Tracker:
         return self._finish(pose, pred, "slam", None, None, 0, int(inl.sum()), t, t0)
 
 
-    def _bound_mapping_lag(self) -> None:
+    @staticmethod
+    def _anchor_usable(ar) -> bool:
+        """The anchors' own pose can be shown as it is: measured this frame on enough corners."""
+        return (ar is not None and ar.world_from_camera is not None and ar.raw_world_from_camera is not None
+                and len(ar.object_points) >= 4)
+
+    @staticmethod
+    def _anchor_output(ar) -> np.ndarray:
+        """The anchors' pose to show: a board's or QR code's many corners are precise as measured (the
+        filter would only add lag on a moving camera); a lone marker's four are smoothed by its filter."""
+        return np.asarray(ar.raw_world_from_camera if len(ar.object_points) >= 12 else ar.world_from_camera, float)
+
+    def _bound_mapping_lag(self, lag: int | None = None) -> None:
         if self.mapper is None or self.max_lag is None:
             return
-        while self._kf_submissions and self._frame - self._kf_submissions[0][0] >= self.max_lag:
+        lag = self.max_lag if lag is None else min(lag, self.max_lag)
+        while self._kf_submissions and self._frame - self._kf_submissions[0][0] >= lag:
             _, n = self._kf_submissions.pop(0)
             self.mapper.wait_done(n)
 
@@ -392,7 +450,8 @@ class Tracker:
             return
         if nkf == 0 and self.mapper.pending == 0:
             need = state == "marker"
-        elif state == "marker" and self._anchor_kfs < 8 and self._frame - self._kf_frame >= 5:
+        elif (state == "marker" and self._anchor_kfs < (4 if self.anchor_first else 8)
+              and self._frame - self._kf_frame >= 5):
             need = True   # early on, every anchor keyframe averages marker noise out of the map
         else:
             if self._frame - self._kf_frame < 3:
@@ -403,7 +462,9 @@ class Tracker:
             kf = near[0]
             moved = np.linalg.norm(kf.centre - pose[:3, 3]) > self.keyframe_parallax * self._depth
             turned = rotation_angle(kf.pose[:3, :3].T @ pose[:3, :3]) > np.radians(8)
-            thin = inliers < 0.7 * self._kf_inliers
+            # while the anchors carry the pose, the map only has to cover new views (no keyframe for a
+            # thinning match count: each one costs a local bundle adjustment)
+            thin = inliers < 0.7 * self._kf_inliers and not (self.anchor_first and state == "marker")
             need = moved or turned or thin
             if state == "slam":
                 need = need and inliers >= 30  # do not grow the map from a weak keypoint-only pose
