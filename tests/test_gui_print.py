@@ -289,8 +289,9 @@ def perimeter_pixels(shown, rgba, tol=40) -> np.ndarray:
 
 
 def perimeter_pixels_on_gcode(shown, layer, profile_path, rgba) -> float:
-    """Fraction of perimeter-coloured overlay pixels within 2 px of the layer's perimeters projected by OpenCV
-    at the frame's pose (bed -> world through the profile's bed_from_anchor; world = the bed marker)."""
+    """Fraction of perimeter-coloured overlay pixels within 3 px of the layer's perimeters projected by OpenCV
+    at the frame's pose (the tracker's estimate, a few tenths of a millimetre off; exact registration
+    against ground truth is tests/test_print_preview.py's job) (bed -> world through the profile's bed_from_anchor; world = the bed marker)."""
     import cv2
 
     from arapp.printing import load_profile
@@ -313,7 +314,7 @@ def perimeter_pixels_on_gcode(shown, layer, profile_path, rgba) -> float:
     dist = cv2.distanceTransform(ref, cv2.DIST_L2, 5)
     ys, xs = np.nonzero(perimeter_pixels(shown, rgba))
     assert len(xs) > 50
-    return float(np.mean(dist[ys, xs] <= 2.0))
+    return float(np.mean(dist[ys, xs] <= 3.0))
 
 
 def test_build_area_warning_in_the_dialog_and_red_on_the_bed(qtbot, window, tmp_path, bed_profile):
