@@ -29,6 +29,7 @@ from arapp.gui import sourcespec
 from arapp.gui.panels.model import MODEL_FILTER, ModelPanel, library_files
 from arapp.gui.panels.replay import ReplayBar
 from arapp.gui.panels.tracking import AnchorsDialog, TrackingPanel
+from arapp.gui.source_dialog import ask_recording, ask_video
 from arapp.gui.tasks import LatestTask, Task, init_ui_bridge
 from arapp.gui.view import VideoView
 from arapp.gui.workers import Engine, SourceInfo
@@ -321,17 +322,15 @@ class MainWindow(QMainWindow):
         self._source_dialog = dlg
 
     def choose_recording(self) -> None:
-        folder = QFileDialog.getExistingDirectory(self, "Open a recording folder", str(Path.cwd() / "recordings"))
+        folder = ask_recording(self)
         if folder:
             self.open_source(folder)
 
     def choose_video(self) -> None:
-        video, _ = QFileDialog.getOpenFileName(self, "Open a video", str(Path.cwd()),
-                                               "Videos (*.mp4 *.mkv *.avi *.mov *.webm);;All files (*)")
-        if not video:
+        chosen = ask_video(self)
+        if chosen is None:
             return
-        calib, _ = QFileDialog.getOpenFileName(self, "Its camera calibration (OpenCV YAML)", str(Path(video).parent),
-                                               "Calibration (*.yaml *.yml *.json);;All files (*)")
+        video, calib = chosen
         if not calib:
             self.show_error("Calibration needed", f"{video}: tracking needs the camera's calibration; "
                             "choose the YAML written by 'arapp calibrate' or OpenCV's calibration tools")

@@ -21,6 +21,23 @@ from arapp.gui import sourcespec
 from arapp.gui.tasks import Task
 
 
+
+def ask_recording(parent) -> str | None:
+    """Ask for a recording folder; None when cancelled."""
+    folder = QFileDialog.getExistingDirectory(parent, "Open a recording folder", str(Path.cwd() / "recordings"))
+    return folder or None
+
+
+def ask_video(parent) -> tuple[str, str | None] | None:
+    """Ask for a video, then its calibration YAML: (video, calibration or None); None when cancelled."""
+    video, _ = QFileDialog.getOpenFileName(parent, "Open a video", str(Path.cwd()),
+                                           "Videos (*.mp4 *.mkv *.avi *.mov *.webm);;All files (*)")
+    if not video:
+        return None
+    calib, _ = QFileDialog.getOpenFileName(parent, "Its camera calibration (OpenCV YAML)", str(Path(video).parent),
+                                           "Calibration (*.yaml *.yml *.json);;All files (*)")
+    return video, calib or None
+
 class SourceDialog(QDialog):
     """Emits source_chosen(spec) and closes when the user picks something."""
 
@@ -108,17 +125,15 @@ class SourceDialog(QDialog):
         self.accept()
 
     def _choose_recording(self) -> None:
-        folder = QFileDialog.getExistingDirectory(self, "Open a recording folder", str(Path.cwd() / "recordings"))
+        folder = ask_recording(self)
         if folder:
             self._choose(folder)
 
     def _choose_video(self) -> None:
-        video, _ = QFileDialog.getOpenFileName(self, "Open a video", str(Path.cwd()),
-                                               "Videos (*.mp4 *.mkv *.avi *.mov *.webm);;All files (*)")
-        if not video:
+        chosen = ask_video(self)
+        if chosen is None:
             return
-        calib, _ = QFileDialog.getOpenFileName(self, "Its camera calibration (OpenCV YAML)", str(Path(video).parent),
-                                               "Calibration (*.yaml *.yml *.json);;All files (*)")
+        video, calib = chosen
         if calib:
             self._choose(sourcespec.video_spec(video, calib))
         else:
