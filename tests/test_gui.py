@@ -18,8 +18,6 @@ import cv2
 import numpy as np
 import pytest
 
-pytest.importorskip("pytestqt")
-
 from PySide6.QtCore import QSettings, Qt  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

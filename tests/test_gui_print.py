@@ -16,8 +16,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("pytestqt")
-
 from PySide6.QtCore import QSettings, Qt  # noqa: E402
 
 from virtual_printer import VirtualPrinterPty  # noqa: E402

@@ -198,7 +198,6 @@ def test_source_specs_and_missing_devices(tmp_path):
 
 
 def test_depthai_without_a_device_says_so():
-    pytest.importorskip("depthai")  # installed in this project; the skip only guards foreign setups
     from tracking.sources import list_depthai
 
     if list_depthai():
