@@ -23,7 +23,6 @@ import multiprocessing as mp
 import threading
 import time
 import traceback
-from dataclasses import dataclass
 
 import numpy as np
 from PySide6.QtCore import QObject, Signal
@@ -31,6 +30,7 @@ from PySide6.QtGui import QImage
 
 from arapp.gui.slots import LatestSlot
 from arapp.gui.workers import Shown, SourceInfo
+from arapp.pipeline import FrameResult
 
 PRELOAD = ["numpy", "cv2", "arapp.pipeline", "arapp.gui.workers", "arapp.gui.sourcespec", "arapp.gui.editing",
            "tracking.sources", "tracking.tracker", "arapp.geometry.model", "trimesh"]
@@ -61,22 +61,9 @@ def warm_up() -> None:
     threading.Thread(target=start, name="arapp-forkserver", daemon=True).start()
 
 
-@dataclass
-class RemoteResult:
-    """The pipeline's FrameResult as it crosses the process boundary (`image`: full-size composite, only with
-    full_frames). `extra` holds the child's view of the model: mesh_faces, model_gen, mode, resets, and `toolpaths`: the print
-    preview drawn (arapp.gui.toolpaths info dict, None before any)."""
-
-    index: int
-    t: float
-    world_from_camera: np.ndarray | None
-    state: str
-    markers: int
-    inliers: int
-    ms_track: float
-    ms_render: float
-    image: np.ndarray | None
-    extra: dict
+# Results cross the process boundary as the pipeline's own FrameResult (`image`: the full-size composite,
+# only with full_frames, else None). `extra` holds the child's view of the model: mesh_faces, model_gen,
+# mode, resets, and `toolpaths`: the print preview drawn (arapp.gui.toolpaths info dict, None before any).
 
 
 # ---------------------------------------------------------------------------------------------- child
@@ -443,7 +430,7 @@ class RemoteEngine(QObject):
             frame = np.frombuffer(full[1], np.uint8).reshape(shape)
         pose = None if meta["pose"] is None else np.asarray(meta["pose"], float)
         extra = {k: meta[k] for k in ("mesh_faces", "model_gen", "mode", "resets", "toolpaths")}
-        result = RemoteResult(meta["index"], meta["t"], pose, meta["state"], meta["markers"], meta["inliers"],
+        result = FrameResult(meta["index"], meta["t"], pose, meta["state"], meta["markers"], meta["inliers"],
                               meta["ms_track"], meta["ms_render"], image, extra)
         self.shown.put(Shown(result, q, frame, meta["captured_at"], meta["processed_at"],
                              dropped_capture=meta["dropped"]))
