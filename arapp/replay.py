@@ -94,6 +94,8 @@ def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | 
                 times.append(frame.t)
                 states.append(res.state)
                 n += 1
+                # faster than real time: let mapping take the time a live frame interval gives it
+                pipeline.tracker.catch_up()
                 if progress is not None:
                     progress(n, total)
         except KeyboardInterrupt:

@@ -17,9 +17,14 @@ Otherwise: markers are detected on a worker thread (every frame while lost or
 while the map is young, else every `marker_every`-th frame) while ORB features
 are extracted; map points are matched by projection from a constant-velocity
 prediction; the pose is a robust joint fit of marker corners and map points
-(anchors dominate), or of map points alone, or comes from relocalisation. New
-keyframes go to the mapping thread (triangulation, culling, local bundle
-adjustment with anchor corners as constraints).
+(anchors dominate), or of map points alone, or comes from relocalisation. When
+all of that fails on a frame that follows a tracked one (motion blur smears
+markers and descriptors alike), keypoints are followed from the last frame by
+optical flow (`tracking.slam.flow`) and carry the pose. New keyframes go to the
+mapping thread (triangulation, culling, local bundle adjustment with anchor
+corners as constraints); `process` never waits for it. Offline drivers, which
+feed frames faster than a camera would, call `catch_up()` between frames so the
+map keeps the pace it would have live, whatever the machine's load.
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ from tracking.camera import Camera
 from tracking.poses import rotation_angle
 from tracking.session import AnchorSpec
 from tracking.slam.features import FeatureExtractor, Features
+from tracking.slam.flow import Tracks, follow, seed_on_plane
 from tracking.slam.fusion import PoseBlender, fuse_pose
 from tracking.slam.map import Map
 from tracking.slam.mapping import KeyframeRequest, LocalMapper
@@ -43,7 +49,7 @@ from tracking.slam.tracking import MotionModel, match_by_projection, plausible, 
 
 MIN_SIDE = 48  # pixels: smaller frames carry nothing trackable
 MAX_TRACKS = 200  # keypoints followed by optical flow between full frames
-KLT_WIN, KLT_LEVELS = (15, 15), 3
+FLOW_SEEDS = 300  # points followed by optical flow when the anchors and the map both fail
 
 
 @dataclass
@@ -69,16 +75,21 @@ class Tracker:
     (False maps inline, deterministic, for tests). max_speed m/s and
     max_angular rad/s bound plausible motion (faster-looking jumps are rejected).
     blend_frames: frames over which a seam between sources is faded.
-    max_backlog: with threaded mapping, a new keyframe waits until at most this many earlier ones
-    are still being mapped (bounds the map's lag when frames come faster than mapping can follow,
-    as in offline replay; live, keyframes are several frames apart and mapping one takes less).
-    None: never wait; keyframes are skipped while mapping is behind.
-    max_lag: a keyframe's mapping (triangulation + local BA, on the mapping thread) must be finished
-    this many frames after it was submitted; tracking waits if it is not (live at 30 fps, 3 frames =
-    100 ms covers it; in fast offline replay it keeps results independent of machine load).
-    None: never wait.
+    max_pending: keyframes waiting for the mapping thread beyond which a new keyframe is skipped
+    (tracking never waits for mapping; the next frame asks again).
+    max_lag: what `catch_up()` (offline drivers only) guarantees: a keyframe's mapping (triangulation
+    + local BA) is finished this many frames after it was submitted, one frame while the anchors
+    carry the pose. Live at 30 fps, 3 frames = 100 ms covers it without any waiting.
     klt: between full frames (those with marker detection), follow the last inlier keypoints by
     optical flow instead of detecting and matching ORB features (much cheaper per frame).
+    flow: when the anchors and the map both fail on a frame after a tracked one, follow keypoints
+    (map points, else points seeded on the anchors' plane) from the last frame by optical flow.
+    blur_px, blur_gate_px, blur_hold_s: under fast motion (the anchors predicted to move more than
+    `blur_px` pixels since the last frame) markers are smeared and their corners can be off by
+    pixels; their pose is then checked against one frame of flow from the last frame, and if the two
+    disagree by more than `blur_gate_px` on the anchors' corners the flow pose is used, for at most
+    `blur_hold_s` seconds since the anchors were last accepted (after that they win again, so flow
+    drift is always bounded by the markers).
     anchor_first: while the anchors are in view, their tracker's pose (raw for 12+ corners, filtered
     for a lone marker) is the output, and keypoints are extracted and matched only on every
     `keypoint_every`-th frame (and when the anchors are not found); a keyframe submitted then is
@@ -90,8 +101,9 @@ class Tracker:
                  n_features: int | None = None, ba: bool = True, threaded: bool = True, max_speed: float = 2.5,
                  max_angular: float = 5.0, blend_frames: int = 8, min_inliers: int = 20, radius: float = 12.0,
                  keyframe_parallax: float = 0.08, corner_weight: float = 4.0, corner_share: float = 1 / 3,
-                 filter: bool = True, max_backlog: int | None = 0, max_lag: int | None = 3,
-                 klt: bool = True, anchor_first: bool = True, keypoint_every: int = 10):
+                 filter: bool = True, max_pending: int = 2, max_lag: int = 3,
+                 klt: bool = True, flow: bool = True, anchor_first: bool = True, keypoint_every: int = 10,
+                 blur_px: float = 10.0, blur_gate_px: float = 1.0, blur_hold_s: float = 0.5):
         from tracking.anchors import AnchorTracker  # the anchors package is built alongside
 
         if not anchors:
@@ -106,9 +118,11 @@ class Tracker:
         self.keyframe_parallax = keyframe_parallax
         self.corner_weight = corner_weight
         self.corner_share = corner_share
-        self.max_backlog = max_backlog
-        self.max_lag = max_lag
+        self.max_pending = max(1, int(max_pending))
+        self.max_lag = max(1, int(max_lag))
         self.klt = klt
+        self.flow = flow
+        self.blur_px, self.blur_gate_px, self.blur_hold_s = blur_px, blur_gate_px, blur_hold_s
         self.anchor_first = bool(anchor_first)
         self.keypoint_every = max(1, int(keypoint_every))
         self._kf_submissions: list[tuple[int, int]] = []   # (frame, mapper request number)
@@ -138,11 +152,15 @@ class Tracker:
         self._anchor_kfs = 0
         self._last_out: np.ndarray | None = None
         self._kf_frame = -(10**9)
-        self._tracks = None
+        self._flow: Tracks | None = None   # points followed by flow, measured in the last frame
+        self._gray: np.ndarray | None = None        # this frame's grey image
+        self._prev_gray: np.ndarray | None = None   # the last tracked frame's grey image
         self._full_tracks = 0
         self._kf_inliers = 0
         self._depth = 0.5
         self._full_frame = -(10**9)
+        self._anchor_t: float | None = None   # when the anchors last gave the pose
+        self._via_flow = False                 # the last frame's pose came from flow
 
     def reset(self) -> None:
         """Forget the map and the motion; the next frame starts from the anchors."""
@@ -173,6 +191,20 @@ class Tracker:
         """Block until queued keyframes are mapped (offline replay, tests)."""
         if self.mapper is not None:
             self.mapper.wait_idle()
+
+    def catch_up(self) -> None:
+        """For offline drivers, between frames: give the mapping thread the time a live camera's
+        frame interval would. Blocks until every keyframe submitted `max_lag` or more frames before
+        the next one is mapped (1 frame while the anchors carry the pose: the cheap anchor frames
+        would otherwise share the interpreter with mapping). Results then do not depend on how fast
+        or loaded the machine is; `process` itself never waits."""
+        if self.mapper is None:
+            return
+        nxt = self._frame + 1
+        lag = 1 if self._last_state == "marker" and self.anchor_first else self.max_lag
+        while self._kf_submissions and nxt - self._kf_submissions[0][0] >= lag:
+            _, n = self._kf_submissions.pop(0)
+            self.mapper.wait_done(n)
 
     # -- per frame ------------------------------------------------------------------
     def _prepare(self, image) -> tuple[np.ndarray | None, np.ndarray | None]:
@@ -208,6 +240,7 @@ class Tracker:
         t0 = time.perf_counter()
         self._frame += 1
         bgr, gray = self._prepare(image)
+        self._gray = gray
         usable = gray is not None
         if usable:
             small = gray[::8, ::8]
@@ -223,10 +256,6 @@ class Tracker:
         ar = None
         anchor_first = (self.anchor_first and self._last_state == "marker" and self._lost == 0
                         and self.motion.last is not None)
-        # Anchor-only frames (below) are a few ms of work: mapping running beside them on the other
-        # thread would stretch every one of them (the GIL), so a keyframe is mapped in one go on the
-        # frame after it instead of spread over the next `max_lag` frames.
-        self._bound_mapping_lag(1 if anchor_first else None)
         if anchor_first:
             # Anchors were measured last frame: the anchor tracker re-finds them at their predicted place
             # (no detector pass, a few ms) and its pose is the most accurate there is. Keypoint
@@ -237,7 +266,10 @@ class Tracker:
             pose = self._anchor_output(ar) if self._anchor_usable(ar) else None
             if (pose is not None and self._frame - self._full_frame < self.keypoint_every
                     and self._plausible(pose, self.motion.last, t)):
-                self._tracks = None   # flow restarts from the next full frame
+                got = self._follow_from_last(gray, t) if self._moving_fast(ar, t) else None
+                if self._smeared(ar, got, t):
+                    return self._flow_result(got, t, t0, int(ar.markers))
+                self._flow = None   # flow restarts from the next full frame (or from this image)
                 return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, int(ar.markers),
                                     int(ar.inliers), t, t0)
             detect = False
@@ -246,6 +278,22 @@ class Tracker:
             if res is not None:
                 self._since_detect += 1
                 return res
+        got = None
+        if self._via_flow and self._frame - self._full_frame < self.keypoint_every:
+            # Flow carried the last frame (motion blur defeats markers and descriptors alike): flow
+            # again beside the marker detection, and the full keypoint work only when both fail or
+            # every `keypoint_every` frames, to get back onto the map.
+            fut = self._pool.submit(self._anchors.process, gray, t) if detect else None
+            got = self._follow_from_last(gray, t)
+            if fut is not None:
+                ar = fut.result()
+                self._since_detect = 0
+                detect = False
+            else:
+                self._since_detect += 1
+            usable = self._anchor_usable(ar) and self._plausible(self._anchor_output(ar), self.motion.last, t)
+            if got is not None and (not usable or self._smeared(ar, got, t)):
+                return self._flow_result(got, t, t0, int(ar.markers) if ar is not None else 0)
         self._full_frame = self._frame
         fut = self._pool.submit(self._anchors.process, gray, t) if detect else None
         # while the map is young, features are only needed on frames that may become keyframes
@@ -258,6 +306,11 @@ class Tracker:
             self._since_detect = 0
         elif ar is None:
             self._since_detect += 1
+        if (got is None and self._anchor_usable(ar) and self._plausible(self._anchor_output(ar), self.motion.last, t)
+                and self._moving_fast(ar, t)):
+            got = self._follow_from_last(gray, t)
+            if self._smeared(ar, got, t):
+                return self._flow_result(got, t, t0, int(ar.markers))
 
         anchor_pose = None
         corners_w = np.zeros((0, 3))
@@ -330,22 +383,26 @@ class Tracker:
                         visible = ids[pi]
 
         if pose is None:
-            return self._lost_frame(t0, markers)
+            if got is None:
+                got = self._follow_from_last(gray, t)
+            return self._flow_result(got, t, t0, markers) if got is not None else self._lost_frame(t0, markers)
 
         self.map.count_matches(visible, inl_ids)
         self._maybe_keyframe(t, pose, feats, inl_ids, inl_feat, corners_w, corners_uv, state, inl_xyz, inliers)
         # keypoints to follow by optical flow until the next full frame
-        self._tracks = None
+        self._flow = None
         if inl_feat.size:
             # a spread subset is plenty for the pose and keeps the flow cheap
             sel = np.arange(inl_feat.size) if inl_feat.size <= MAX_TRACKS else np.linspace(
                 0, inl_feat.size - 1, MAX_TRACKS).astype(int)
-            self._tracks = (gray, feats.xy[inl_feat[sel]].astype(np.float32), inl_xyz[sel].copy())
+            self._flow = Tracks(gray, feats.xy[inl_feat[sel]].astype(np.float32), inl_xyz[sel].copy())
         self._full_tracks = int(min(inl_feat.size, MAX_TRACKS))
         return self._finish(pose, pred, state, source, out_pose, markers, inliers, t, t0)
 
     def _finish(self, pose, pred, state, source, out_pose, markers, inliers, t, t0) -> TrackResult:
         self._since_anchor = 0 if state == "marker" else self._since_anchor + 1
+        if state == "marker":
+            self._anchor_t = t
         anchored = state == "marker" or (self._anchored and self._since_anchor < self.marker_every)
         if source is None:
             source = "fused" if anchored else "map"
@@ -356,35 +413,69 @@ class Tracker:
         self._last_good_t = t
         self._last_state = state
         self._last_out = out
+        self._prev_gray = self._gray
+        self._via_flow = False
         return TrackResult(out, state, markers, inliers, (time.perf_counter() - t0) * 1000.0)
 
     # -- pieces ---------------------------------------------------------------------
     def _klt_frame(self, gray, t, t0) -> TrackResult | None:
-        """Between full frames: follow last frame's inlier keypoints by pyramidal Lucas-Kanade flow and
-        refine the pose on them (no detection, no descriptors). None when that is not good enough."""
-        if self._tracks is None or self.motion.last is None:
+        """Between full frames: follow last frame's inlier map points by optical flow and refine the
+        pose on them (no detection, no descriptors). None when that is not good enough."""
+        if self._flow is None or self.motion.last is None:
             return None
-        prev, xy, X = self._tracks
         # flow only from a well-supported full frame, and only while most of its tracks survive
-        if self._full_tracks < 4 * self.min_inliers or xy.shape[0] < 0.6 * self._full_tracks:
+        if self._full_tracks < 4 * self.min_inliers or len(self._flow) < 0.6 * self._full_tracks:
             return None
-        nxt, st, err = cv2.calcOpticalFlowPyrLK(prev, gray, xy.reshape(-1, 1, 2), None, winSize=KLT_WIN, maxLevel=KLT_LEVELS,
-                                              criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 10, 0.05))
-        nxt = nxt.reshape(-1, 2)
-        # patch dissimilarity: a hand or a reflection sliding over a keypoint is not followed
-        ok = (st.ravel() == 1) & (err.ravel() < 20.0) & (nxt[:, 0] >= 0) & (nxt[:, 1] >= 0) & (nxt[:, 0] < gray.shape[1]) & (
-            nxt[:, 1] < gray.shape[0])
-        if ok.sum() < self.min_inliers:
-            return None
-        und = self.camera.undistort_points(nxt[ok].astype(float)) if self.camera.has_distortion else nxt[ok].astype(float)
         pred = self.motion.predict(t)
-        pose, inl, _ = refine_pose(self.K, pred, X[ok], und)
-        if inl.sum() < max(self.min_inliers, 0.8 * ok.sum()) or not self._plausible(pose, self.motion.last, t):
+        got = follow(self.camera, self._flow, gray, pred, self.min_inliers, min_inlier_ratio=0.8)
+        if got is None or not self._plausible(got[0], self.motion.last, t):
             return None
-        keep = np.nonzero(ok)[0][inl]
-        self._tracks = (gray, nxt[keep].astype(np.float32), X[keep])
-        return self._finish(pose, pred, "slam", None, None, 0, int(inl.sum()), t, t0)
+        self._flow = got[1]
+        return self._finish(got[0], pred, "slam", None, None, 0, len(got[1]), t, t0)
 
+    def _follow_from_last(self, gray, t) -> tuple[np.ndarray, Tracks] | None:
+        """One frame of optical flow from the last tracked frame: its flow points or map inliers,
+        topped up with points seeded on the anchors' plane in the last image. (pose, tracks now
+        measured in `gray`), or None when the flow does not hold or the pose is implausible."""
+        if (not self.flow or self._lost > 0 or self.motion.last is None or self._prev_gray is None
+                or self._prev_gray.shape != gray.shape):
+            return None
+        tracks = self._flow
+        if tracks is None or len(tracks) < FLOW_SEEDS // 2:
+            tracks = seed_on_plane(self.camera, self._prev_gray, self.motion.last, FLOW_SEEDS, keep=tracks)
+        got = follow(self.camera, tracks, gray, self.motion.predict(t), self.min_inliers)
+        if got is None or not self._plausible(got[0], self.motion.last, t):
+            return None
+        return got
+
+    def _smeared(self, ar, got, t) -> bool:
+        """Whether the anchors' measurement this frame is to be distrusted in favour of the flow pose
+        `got` (see blur_px / blur_gate_px / blur_hold_s): the image moved fast (the flow measures it
+        without any pose), recently anchored, and the two poses disagree on the anchors' corners."""
+        if got is None or self._anchor_t is None or t - self._anchor_t > self.blur_hold_s:
+            return False
+        if got[1].moved is None or float(np.median(got[1].moved)) < self.blur_px:
+            return False
+        corners = np.asarray(ar.object_points, float).reshape(-1, 3)
+        gap = np.linalg.norm(self.camera.project_world(corners, self._anchor_output(ar))
+                             - self.camera.project_world(corners, got[0]), axis=1).max()
+        return gap > self.blur_gate_px
+
+    def _moving_fast(self, ar, t) -> bool:
+        """Whether the anchors may have moved more than blur_px in the image since the last frame, by the
+        motion model or by their own measurement (the model lags when the camera turns around)."""
+        if not self.flow or self.motion.last is None:
+            return False
+        corners = np.asarray(ar.object_points, float).reshape(-1, 3)
+        last = self.camera.project_world(corners, self.motion.last)
+        return any(np.linalg.norm(self.camera.project_world(corners, p) - last, axis=1).max() >= self.blur_px
+                   for p in (self.motion.predict(t), self._anchor_output(ar)))
+
+    def _flow_result(self, got, t, t0, markers: int) -> TrackResult:
+        res = self._finish(got[0], self.motion.predict(t), "slam", None, None, markers, len(got[1]), t, t0)
+        self._flow = got[1]
+        self._via_flow = True
+        return res
 
     @staticmethod
     def _anchor_usable(ar) -> bool:
@@ -397,14 +488,6 @@ class Tracker:
         """The anchors' pose to show: a board's or QR code's many corners are precise as measured (the
         filter would only add lag on a moving camera); a lone marker's four are smoothed by its filter."""
         return np.asarray(ar.raw_world_from_camera if len(ar.object_points) >= 12 else ar.world_from_camera, float)
-
-    def _bound_mapping_lag(self, lag: int | None = None) -> None:
-        if self.mapper is None or self.max_lag is None:
-            return
-        lag = self.max_lag if lag is None else min(lag, self.max_lag)
-        while self._kf_submissions and self._frame - self._kf_submissions[0][0] >= lag:
-            _, n = self._kf_submissions.pop(0)
-            self.mapper.wait_done(n)
 
     def _plausible(self, pose, ref, t, lost: bool = False) -> bool:
         if ref is None:
@@ -446,8 +529,8 @@ class Tracker:
             d = np.linalg.norm(pts - pose[:3, 3], axis=1)
             self._depth = float(np.median(d))
         nkf = len(self.map.keyframes)
-        if self.max_backlog is None and self.mapper.pending > 2:
-            return
+        if self.mapper.pending >= self.max_pending:
+            return   # mapping is behind: no waiting here, a later frame asks again
         if nkf == 0 and self.mapper.pending == 0:
             need = state == "marker"
         elif (state == "marker" and self._anchor_kfs < (4 if self.anchor_first else 8)
@@ -470,8 +553,6 @@ class Tracker:
                 need = need and inliers >= 30  # do not grow the map from a weak keypoint-only pose
         if not need:
             return
-        if self.max_backlog is not None:
-            self.mapper.wait_backlog(self.max_backlog)
         pid = np.full(len(feats), -1, int)
         pid[inl_feat] = inl_ids
         self.mapper.submit(KeyframeRequest(t, pose.copy(), feats, pid, corners_w if state == "marker" else None,
@@ -494,7 +575,9 @@ class Tracker:
 
     def _lost_frame(self, t0: float, markers: int) -> TrackResult:
         self._lost += 1
-        self._tracks = None
+        self._flow = None
+        self._prev_gray = None
+        self._via_flow = False
         self.motion.lose()
         self.blender.reset()
         self._last_state = "lost"

@@ -1,0 +1,134 @@
+"""Keypoints followed from frame to frame by pyramidal Lucas-Kanade optical flow, and the pose they give.
+
+Flow holds where descriptors do not. On a motion-blurred frame FAST finds few
+corners and the ORB descriptor of a smeared patch matches nothing of the sharp
+keyframes, but consecutive frames are blurred almost alike, so a patch followed
+from one frame to the next still lands on the same surface point. Each followed
+point keeps the world point it images, and the pose is a robust fit to them.
+
+Where the followed points come from:
+- map points matched in the last full frame (triangulated, bundle-adjusted);
+- points seeded in the last tracked image and placed where their ray meets the
+  anchors' plane (world z = 0): the markers lie on a table, a wall or a printer
+  bed, and what surrounds them mostly lies in that plane too. This is what
+  carries the pose when the map has no points yet (a camera that only turns
+  triangulates nothing). Seeds off the plane disagree with the others as soon
+  as the camera moves sideways and are dropped by the robust fit.
+
+Pixels: `xy` are distorted image pixels (what the flow measures); the pose fit
+works on undistorted pixels. World points in metres, poses `world_from_camera`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from tracking.camera import Camera
+from tracking.slam.tracking import pnp_ransac, refine_pose
+
+WINDOW = (21, 21)       # pixels: big enough to hold a smeared corner
+LEVELS = 3              # pyramid levels above the image: with a predicted start, 30+ px/frame is fine
+MAX_PATCH_ERROR = 30.0  # mean absolute grey difference of a followed patch; above it the point was lost
+CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 0.03)
+
+
+@dataclass
+class Tracks:
+    """Points followed by flow. `image` the grey frame they were measured in; `xy` their distorted
+    pixels there (N,2) float32; `X` the world points they image (N,3) metres; `moved` how far each
+    moved from the frame before, pixels (N,), when they were followed into this one."""
+
+    image: np.ndarray
+    xy: np.ndarray
+    X: np.ndarray
+    moved: np.ndarray | None = None
+
+    def __len__(self) -> int:
+        return int(self.xy.shape[0])
+
+
+def lift_to_plane(camera: Camera, world_from_camera: np.ndarray, xy: np.ndarray,
+                  max_depth_ratio: float = 6.0, min_grazing_deg: float = 8.0) -> tuple[np.ndarray, np.ndarray]:
+    """World points (N,3) where the rays through distorted pixels xy (N,2) meet the plane z = 0, and a
+    mask (N,) of those that are usable: in front of the camera, not at a grazing angle, and no deeper
+    than `max_depth_ratio` times the camera's height above the plane."""
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    if xy.shape[0] == 0:
+        return np.zeros((0, 3)), np.zeros(0, bool)
+    und = camera.undistort_points(xy) if camera.has_distortion else xy
+    K = camera.K
+    rays = np.c_[(und[:, 0] - K[0, 2]) / K[0, 0], (und[:, 1] - K[1, 2]) / K[1, 1], np.ones(len(und))]
+    d = rays @ world_from_camera[:3, :3].T          # world directions, camera depth 1
+    c = world_from_camera[:3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        depth = -c[2] / d[:, 2]                      # camera depth of the intersection
+    X = c + depth[:, None] * d
+    height = abs(float(c[2]))
+    sin_graze = np.abs(d[:, 2]) / np.linalg.norm(d, axis=1)
+    ok = (np.isfinite(depth) & (depth > 0.02) & (depth < max_depth_ratio * max(height, 0.05))
+          & (sin_graze > np.sin(np.radians(min_grazing_deg))))
+    return X, ok
+
+
+def seed_on_plane(camera: Camera, gray: np.ndarray, world_from_camera: np.ndarray, n: int = 300,
+                  keep: Tracks | None = None, min_distance: int = 10) -> Tracks:
+    """Tracks for the grey image `gray` taken at `world_from_camera`: the points of `keep` (if any,
+    measured in this same image) plus up to n - len(keep) new corners (Shi-Tomasi), away from those,
+    placed on the anchors' plane."""
+    xy = np.zeros((0, 2), np.float32) if keep is None else keep.xy
+    X = np.zeros((0, 3)) if keep is None else keep.X
+    want = n - xy.shape[0]
+    if want > 0:
+        mask = np.full(gray.shape, 255, np.uint8)
+        for u, v in xy:
+            cv2.circle(mask, (int(u), int(v)), min_distance, 0, -1)
+        new = cv2.goodFeaturesToTrack(gray, want, 0.01, min_distance, mask=mask, blockSize=5)
+        if new is not None:
+            new = new.reshape(-1, 2)
+            Xn, ok = lift_to_plane(camera, world_from_camera, new)
+            xy = np.vstack([xy, new[ok].astype(np.float32)])
+            X = np.vstack([X, Xn[ok]])
+    return Tracks(gray, np.ascontiguousarray(xy, np.float32), X)
+
+
+def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarray, min_inliers: int = 20,
+           min_inlier_ratio: float = 0.6) -> tuple[np.ndarray, Tracks] | None:
+    """Follow `tracks` into the grey image `gray` and fit the pose there.
+
+    The flow starts each point where `predicted` (world_from_camera, e.g. constant velocity) projects
+    its world point, so fast motion needs no wide search. Returns (world_from_camera, the inlier tracks
+    now measured in `gray`), or None when too few points were followed or the fit does not hold them
+    (fewer than `min_inliers`, or under `min_inlier_ratio` of the followed ones).
+    """
+    if len(tracks) < min_inliers:
+        return None
+    h, w = gray.shape[:2]
+    start = camera.project_world(tracks.X, predicted).astype(np.float32)
+    inside = (start[:, 0] > -w) & (start[:, 0] < 2 * w) & (start[:, 1] > -h) & (start[:, 1] < 2 * h)
+    start = np.where(inside[:, None], start, tracks.xy)
+    nxt, st, err = cv2.calcOpticalFlowPyrLK(tracks.image, gray, tracks.xy.reshape(-1, 1, 2), start.reshape(-1, 1, 2).copy(),
+                                          winSize=WINDOW, maxLevel=LEVELS, criteria=CRITERIA,
+                                          flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
+    nxt = nxt.reshape(-1, 2)
+    ok = ((st.ravel() == 1) & (err.ravel() < MAX_PATCH_ERROR) & (nxt[:, 0] >= 0) & (nxt[:, 1] >= 0)
+          & (nxt[:, 0] <= w - 1) & (nxt[:, 1] <= h - 1))
+    if ok.sum() < min_inliers:
+        return None
+    idx = np.nonzero(ok)[0]
+    X = tracks.X[idx]
+    und = camera.undistort_points(nxt[idx].astype(float)) if camera.has_distortion else nxt[idx].astype(float)
+    pose, inl, _ = refine_pose(camera.K, predicted, X, und)
+    if inl.sum() < max(min_inliers, min_inlier_ratio * idx.size):
+        # a poor prediction: start again from a RANSAC solution
+        guess, mask = pnp_ransac(camera.K, X, und, guess=predicted)
+        if guess is None:
+            return None
+        pose, inl, _ = refine_pose(camera.K, guess, X, und)
+        if inl.sum() < max(min_inliers, min_inlier_ratio * idx.size):
+            return None
+    keep = idx[inl]
+    moved = np.linalg.norm(nxt[keep] - tracks.xy[keep], axis=1)
+    return pose, Tracks(gray, np.ascontiguousarray(nxt[keep], np.float32), tracks.X[keep], moved)
