@@ -72,6 +72,24 @@ def test_fast_blurred_pan_is_tracked_between_the_sharp_turns():
     assert np.sqrt(np.nanmean(err ** 2)) < 0.5 * np.sqrt(np.mean(np.square(plain_err)))
 
 
+def test_flow_alone_carries_the_pose_for_a_bounded_time():
+    """Neither anchors nor map in sight: flow holds the last pose for flow_hold_s, then the frame is lost."""
+    frames, session = recording("fast_motion", slice(0, 21))
+    with Tracker(session.camera, session.anchors, flow_hold_s=1.0) as tr:
+        states = [tr.process(img, t).state for t, img, _ in frames]
+        assert states[-1] == "slam" and "marker" in states
+        start = frames[states.index("slam")][0]
+        t_last, still = frames[-1][0], frames[-1][1]
+        late = []
+        for k in range(1, 60):   # the same blurred view for two more seconds
+            t = t_last + k / 30.0
+            res = tr.process(still, t)
+            late.append((t - start, res.state))
+    held = [dt for dt, s in late if s == "slam"]
+    assert held and max(held) <= 1.0 + 1e-6 and max(held) > 0.9
+    assert all(s == "lost" for dt, s in late if dt > 1.0 + 1e-6)
+
+
 def test_tracking_never_waits_for_mapping(monkeypatch):
     """Live, frames are not held up by a slow mapping thread; offline, catch_up() lets it keep pace."""
     import time

@@ -90,6 +90,8 @@ class Tracker:
     disagree by more than `blur_gate_px` on the anchors' corners the flow pose is used, for at most
     `blur_hold_s` seconds since the anchors were last accepted (after that they win again, so flow
     drift is always bounded by the markers).
+    flow_hold_s: the longest that flow alone (neither anchors nor map confirming) carries the pose;
+    after that the frame is lost until the anchors or the map take it up again.
     anchor_first: while the anchors are in view, their tracker's pose (raw for 12+ corners, filtered
     for a lone marker) is the output, and keypoints are extracted and matched only on every
     `keypoint_every`-th frame (and when the anchors are not found); a keyframe submitted then is
@@ -103,7 +105,8 @@ class Tracker:
                  keyframe_parallax: float = 0.08, corner_weight: float = 4.0, corner_share: float = 1 / 3,
                  filter: bool = True, max_pending: int = 2, max_lag: int = 3,
                  klt: bool = True, flow: bool = True, anchor_first: bool = True, keypoint_every: int = 10,
-                 blur_px: float = 10.0, blur_gate_px: float = 1.0, blur_hold_s: float = 0.5):
+                 blur_px: float = 10.0, blur_gate_px: float = 1.0, blur_hold_s: float = 0.5,
+                 flow_hold_s: float = 2.0):
         from tracking.anchors import AnchorTracker  # the anchors package is built alongside
 
         if not anchors:
@@ -123,6 +126,7 @@ class Tracker:
         self.klt = klt
         self.flow = flow
         self.blur_px, self.blur_gate_px, self.blur_hold_s = blur_px, blur_gate_px, blur_hold_s
+        self.flow_hold_s = flow_hold_s
         self.anchor_first = bool(anchor_first)
         self.keypoint_every = max(1, int(keypoint_every))
         self._kf_submissions: list[tuple[int, int]] = []   # (frame, mapper request number)
@@ -161,6 +165,7 @@ class Tracker:
         self._full_frame = -(10**9)
         self._anchor_t: float | None = None   # when the anchors last gave the pose
         self._via_flow = False                 # the last frame's pose came from flow
+        self._flow_start: float | None = None  # when flow alone began to carry the pose
 
     def reset(self) -> None:
         """Forget the map and the motion; the next frame starts from the anchors."""
@@ -438,7 +443,8 @@ class Tracker:
         topped up with points seeded on the anchors' plane in the last image. (pose, tracks now
         measured in `gray`), or None when the flow does not hold or the pose is implausible."""
         if (not self.flow or self._lost > 0 or self.motion.last is None or self._prev_gray is None
-                or self._prev_gray.shape != gray.shape):
+                or self._prev_gray.shape != gray.shape
+                or (self._via_flow and t - self._flow_start > self.flow_hold_s)):
             return None
         tracks = self._flow
         if tracks is None or len(tracks) < FLOW_SEEDS // 2:
@@ -472,9 +478,10 @@ class Tracker:
                    for p in (self.motion.predict(t), self._anchor_output(ar)))
 
     def _flow_result(self, got, t, t0, markers: int) -> TrackResult:
+        start = self._flow_start if self._via_flow else t
         res = self._finish(got[0], self.motion.predict(t), "slam", None, None, markers, len(got[1]), t, t0)
         self._flow = got[1]
-        self._via_flow = True
+        self._via_flow, self._flow_start = True, start
         return res
 
     @staticmethod

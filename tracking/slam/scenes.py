@@ -74,14 +74,28 @@ def render_sequence(scene_json: dict, frames: slice | None = None):
     return out, scene
 
 
-def run_tracker(tracker, frames) -> dict:
-    """Track frames [(t, image, true pose)]; returns times, poses (None when lost), states, ms, metrics."""
+def run_tracker(tracker, frames, pace: str = "offline") -> dict:
+    """Track frames [(t, image, true pose)]; returns times, poses (None when lost), states, ms, metrics.
+
+    pace: "offline" as fast as possible, with `tracker.catch_up()` between frames (mapping keeps the
+    pace it would have live, whatever the machine's load); "live" frames handed in at the recording's
+    own rate, as a camera would (no catch-up); "flat-out" as fast as possible without catch-up (the
+    mapping thread gets only what time is left over: a worst case).
+    """
+    if pace not in ("offline", "live", "flat-out"):
+        raise ValueError(f"pace must be 'offline', 'live' or 'flat-out', not {pace!r}")
     times, poses, states, ms, inl = [], [], [], [], []
+    start = time.perf_counter()
     for t, img, _ in frames:
+        if pace == "live":
+            wait = start + (t - frames[0][0]) - time.perf_counter()
+            if wait > 0:
+                time.sleep(wait)
         t0 = time.perf_counter()
         res = tracker.process(img, t)
         ms.append((time.perf_counter() - t0) * 1000.0)
-        tracker.catch_up()   # offline: mapping keeps the pace it would have live
+        if pace == "offline":
+            tracker.catch_up()
         times.append(t)
         poses.append(res.world_from_camera)
         states.append(res.state)
