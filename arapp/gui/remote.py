@@ -29,7 +29,7 @@ from PySide6.QtCore import QObject, Signal
 from PySide6.QtGui import QImage
 
 from arapp.gui.slots import LatestSlot
-from arapp.gui.workers import Shown, SourceInfo
+from arapp.gui.workers import ProcessingStage, Shown, SourceInfo
 from arapp.pipeline import FrameResult
 
 PRELOAD = ["numpy", "cv2", "arapp.pipeline", "arapp.gui.workers", "arapp.gui.sourcespec", "arapp.gui.editing",
@@ -82,20 +82,16 @@ class _Child:
         self.full_frames = full_frames
         self.lock = threading.Lock()
         self.captured, self.shown = LatestSlot(), LatestSlot()
-        self.processor = None
         self.info = None
         self.autoplay = playing
         self.first_ready = False
-        self.display_size = display_size
-        self.highlight = None
+        self.stage = ProcessingStage(display_size)
         self.state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0, "toolpaths": None}
         self.models: dict = {}
-        self.submit_lock = threading.Lock()
         self.stop = threading.Event()
         self.player = Player(self._open, self.captured, speed=speed, loop=loop, playing=False,
                              on_open=self._opened, on_error=self.send_error, on_end=lambda: self.send(("ended",)))
         self.player._steps = 1
-        self.pending: list = []
         from arapp.gui.toolpaths import ToolpathStage
 
         self.toolpaths = ToolpathStage(self.submit, self._toolpaths_shown, self.send_error)
@@ -134,14 +130,7 @@ class _Child:
         self.info = info
         processor = Processor(lambda: self._make_pipeline(info), self.captured, self.shown,
                               on_ready=self._ready, on_error=self.send_error, skipped=lambda: self.player.skipped)
-        processor.display_size = self.display_size
-        processor.highlight = self.highlight
-        with self.submit_lock:
-            self.processor = processor
-            for fn in self.pending:
-                processor.submit(fn)
-            self.pending.clear()
-        processor.start()
+        self.stage.start(processor)
         if info.live and self.autoplay:
             self.player.play()
         self.send(("opened", {"name": info.name, "seekable": info.seekable, "frame_count": info.frame_count,
@@ -162,12 +151,7 @@ class _Child:
 
     def submit(self, fn) -> None:
         """fn(pipeline) between frames in the pipeline thread (queued until it exists); any thread."""
-        with self.submit_lock:
-            if self.processor is None:
-                self.pending.append(fn)
-                return
-            processor = self.processor
-        processor.submit(fn)
+        self.stage.submit(fn)
 
     # -- commands from the UI ------------------------------------------------------------
     def _load(self, path: str, edits: dict):
@@ -200,9 +184,7 @@ class _Child:
         elif kind == "loop":
             p.set_loop(msg[1])
         elif kind == "display_size":
-            self.display_size = msg[1]
-            if self.processor is not None:
-                self.processor.display_size = msg[1]
+            self.stage.set_display_size(msg[1])
         elif kind == "reset":
             def reset(pipe):
                 pipe.reset()
@@ -218,10 +200,7 @@ class _Child:
 
             self.submit(set_mode)
         elif kind == "highlight":
-            self.highlight = msg[1]
-            if self.processor is not None:
-                self.processor.highlight = msg[1]
-                self.processor.submit(lambda pipe: None)  # redraw a paused frame
+            self.stage.set_highlight(msg[1])
         elif kind == "placement":
             placement = msg[1]
             self.submit(lambda pipe: pipe.set_placement(placement))
@@ -282,7 +261,7 @@ class _Child:
         while not self.stop.is_set():
             shown = self.shown.take(timeout=0.5)
             if shown is None:
-                if not self.player.is_alive() and (self.processor is None or not self.processor.is_alive()):
+                if not self.player.is_alive() and not self.stage.is_alive():
                     if self.captured.peek() is None:
                         break
                 continue
@@ -302,9 +281,10 @@ class _Child:
             self.send(("frame", meta), *blobs)
         self.player.stop()
         self.toolpaths.stop()
-        if self.processor is not None:
-            self.processor.stop()
-            self.processor.join(5.0)
+        processor = self.stage.current()
+        if processor is not None:
+            processor.stop()
+            processor.join(5.0)
         self.player.join(5.0)
 
 

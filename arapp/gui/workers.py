@@ -517,6 +517,62 @@ class Processor(threading.Thread):
                 pass
 
 
+class ProcessingStage:
+    """Where an engine keeps its Processor, which exists only once the source is open. Commands
+    submitted before then wait and are handed over in order; the view's settings (display size,
+    ringed control point) are kept and given to the processor when it starts. Used by both engines
+    (threads here, the child process in remote.py); any thread."""
+
+    def __init__(self, display_size: tuple[int, int] | None = None):
+        self._lock = threading.Lock()
+        self._pending: list = []
+        self.processor: Processor | None = None
+        self.display_size = display_size
+        self.highlight: tuple[int, int, int] | None = None
+
+    def start(self, processor: Processor) -> None:
+        """Hand over the queued commands and settings, then start the processing thread."""
+        processor.display_size = self.display_size
+        processor.highlight = self.highlight
+        with self._lock:
+            self.processor = processor
+            for fn in self._pending:
+                processor.submit(fn)
+            self._pending.clear()
+        processor.start()
+
+    def submit(self, fn: Callable[[Any], None]) -> None:
+        """Run fn(pipeline) in the processing thread between frames (queued until it exists)."""
+        with self._lock:
+            if self.processor is None:
+                self._pending.append(fn)
+                return
+            processor = self.processor
+        processor.submit(fn)
+
+    def set_display_size(self, size: tuple[int, int] | None) -> None:
+        self.display_size = size
+        with self._lock:
+            if self.processor is not None:
+                self.processor.display_size = size
+
+    def set_highlight(self, point: tuple[int, int, int] | None) -> None:
+        self.highlight = point
+        with self._lock:
+            processor = self.processor
+        if processor is not None:
+            processor.highlight = point
+            processor.submit(lambda p: None)  # redraw a paused frame
+
+    def current(self) -> Processor | None:
+        with self._lock:
+            return self.processor
+
+    def is_alive(self) -> bool:
+        processor = self.current()
+        return processor is not None and processor.is_alive()
+
+
 class Engine(QObject):
     """One open source with its two worker threads, seen from the UI thread through signals.
 
@@ -542,17 +598,13 @@ class Engine(QObject):
         self.shown = LatestSlot()
         self.info: SourceInfo | None = None
         self._notify_pending = threading.Event()
-        self._pending_commands: list = []
-        self._lock = threading.Lock()
-        self.processor: Processor | None = None
+        self.stage = ProcessingStage()
         # A recording starts with its first frame only, and plays once that frame is on its way to the
         # screen: otherwise it would run ahead while the pipeline starts up (GL, tracker), and those
         # frames would be dropped unseen.
         self._autoplay = playing
         self._first_ready = False
-        self.display_size: tuple[int, int] | None = None
         self.model_state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0, "toolpaths": None}
-        self._highlight = None
         self.player = Player(opener, self.captured, speed=speed, loop=loop, playing=False, on_demand=on_demand,
                              on_open=self._on_open, on_error=self.error.emit, on_end=self.ended.emit)
         self.player._steps = 1
@@ -573,14 +625,7 @@ class Engine(QObject):
         processor = Processor(lambda: self.pipeline_factory(source, info), self.captured, self.shown,
                               on_ready=self._on_ready, on_error=self.error.emit,
                               skipped=lambda: self.player.skipped)
-        processor.display_size = self.display_size
-        processor.highlight = self._highlight
-        with self._lock:
-            self.processor = processor
-            for fn in self._pending_commands:
-                processor.submit(fn)
-            self._pending_commands.clear()
-        processor.start()
+        self.stage.start(processor)
         if info.live and self._autoplay:
             self.player.play()  # a camera does not wait
         self.opened.emit(info)
@@ -599,8 +644,7 @@ class Engine(QObject):
         self.player.stop()
         if self._toolpaths is not None:
             self._toolpaths.stop()
-        with self._lock:
-            processor = self.processor
+        processor = self.stage.current()
         if processor is not None:
             processor.stop()
         if wait > 0:
@@ -611,7 +655,7 @@ class Engine(QObject):
 
     @property
     def running(self) -> bool:
-        return self.player.is_alive() or (self.processor is not None and self.processor.is_alive())
+        return self.player.is_alive() or self.stage.is_alive()
 
     # -- UI side -----------------------------------------------------------------------
     def take(self) -> Shown | None:
@@ -626,19 +670,11 @@ class Engine(QObject):
 
     def set_display_size(self, width: int, height: int) -> None:
         """The size the view paints frames at (device pixels); frames are scaled to fit it in the worker."""
-        self.display_size = (int(width), int(height))
-        with self._lock:
-            if self.processor is not None:
-                self.processor.display_size = self.display_size
+        self.stage.set_display_size((int(width), int(height)))
 
     def submit(self, fn: Callable[[Any], None]) -> None:
         """Run fn(pipeline) in the processing thread between frames (queued until the pipeline exists)."""
-        with self._lock:
-            if self.processor is None:
-                self._pending_commands.append(fn)
-                return
-            processor = self.processor
-        processor.submit(fn)
+        self.stage.submit(fn)
 
     # the same commands as remote.RemoteEngine ------------------------------------------------
     def set_model(self, gen: int, path: str | None, edits: dict, placement: dict | None, mode: str,
@@ -658,11 +694,7 @@ class Engine(QObject):
 
     def set_highlight(self, point: tuple[int, int, int] | None) -> None:
         """Ring control point (surface, i, j) of the shown model on screen; None: no ring."""
-        self._highlight = point
-        with self._lock:
-            if self.processor is not None:
-                self.processor.highlight = point
-                self.processor.submit(lambda p: None)  # redraw a paused frame
+        self.stage.set_highlight(point)
 
     def set_mode(self, mode: str) -> None:
         def apply(p):
