@@ -84,18 +84,17 @@ class Tracker:
     optical flow instead of detecting and matching ORB features (much cheaper per frame).
     flow: when the anchors and the map both fail on a frame after a tracked one, follow keypoints
     (map points, else points seeded on the anchors' plane) from the last frame by optical flow.
-    blur_px, blur_gate_px, blur_hold_s: under fast motion (the anchors predicted to move more than
-    `blur_px` pixels since the last frame) markers are smeared and their corners can be off by
-    pixels; their pose is then checked against one frame of flow from the last frame, and if the two
-    disagree by more than `blur_gate_px` on the anchors' corners the flow pose is used, for at most
-    `blur_hold_s` seconds since the anchors were last accepted (after that they win again, so flow
-    drift is always bounded by the markers).
+    blur_px, blur_gate_px, blur_hold_s: under fast motion markers are smeared and their corners can
+    be off by pixels. When the anchors may have moved `blur_px` pixels or more since the last frame,
+    one frame of flow from the last frame is computed as well; if the flow confirms the image moved
+    that far and the two poses disagree by more than `blur_gate_px` on the anchors' corners, the
+    flow pose is used, for at most `blur_hold_s` seconds since the anchors were last accepted (after
+    that they win again, so flow drift is always bounded by the markers).
     flow_hold_s: the longest that flow alone (neither anchors nor map confirming) carries the pose;
     after that the frame is lost until the anchors or the map take it up again.
     anchor_first: while the anchors are in view, their tracker's pose (raw for 12+ corners, filtered
     for a lone marker) is the output, and keypoints are extracted and matched only on every
-    `keypoint_every`-th frame (and when the anchors are not found); a keyframe submitted then is
-    mapped on the next frame (waiting for it), not beside the following cheap frames.
+    `keypoint_every`-th frame (and when the anchors are not found).
     False: the joint marker + keypoint fit on every detection frame (the earlier behaviour).
     """
 
@@ -283,13 +282,13 @@ class Tracker:
             if res is not None:
                 self._since_detect += 1
                 return res
-        got = None
+        got, flow_tried = None, False
         if self._via_flow and self._frame - self._full_frame < self.keypoint_every:
             # Flow carried the last frame (motion blur defeats markers and descriptors alike): flow
             # again beside the marker detection, and the full keypoint work only when both fail or
             # every `keypoint_every` frames, to get back onto the map.
             fut = self._pool.submit(self._anchors.process, gray, t) if detect else None
-            got = self._follow_from_last(gray, t)
+            got, flow_tried = self._follow_from_last(gray, t), True
             if fut is not None:
                 ar = fut.result()
                 self._since_detect = 0
@@ -311,9 +310,9 @@ class Tracker:
             self._since_detect = 0
         elif ar is None:
             self._since_detect += 1
-        if (got is None and self._anchor_usable(ar) and self._plausible(self._anchor_output(ar), self.motion.last, t)
-                and self._moving_fast(ar, t)):
-            got = self._follow_from_last(gray, t)
+        if (not flow_tried and self._anchor_usable(ar)
+                and self._plausible(self._anchor_output(ar), self.motion.last, t) and self._moving_fast(ar, t)):
+            got, flow_tried = self._follow_from_last(gray, t), True
             if self._smeared(ar, got, t):
                 return self._flow_result(got, t, t0, int(ar.markers))
 
@@ -388,7 +387,7 @@ class Tracker:
                         visible = ids[pi]
 
         if pose is None:
-            if got is None:
+            if not flow_tried:
                 got = self._follow_from_last(gray, t)
             return self._flow_result(got, t, t0, markers) if got is not None else self._lost_frame(t0, markers)
 

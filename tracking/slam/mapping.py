@@ -156,13 +156,6 @@ class LocalMapper:
         else:
             self._process(req)
 
-    def wait_backlog(self, n: int) -> None:
-        """Block until at most n submitted keyframes wait for mapping (bounded mapping lag)."""
-        if not self.threaded:
-            return
-        with self._cv:
-            self._cv.wait_for(lambda: self._untriangulated <= n or self._thread is None, timeout=5.0)
-
     def wait_idle(self) -> None:
         """Block until every submitted keyframe is mapped (for tests and offline replay)."""
         if self.threaded:
