@@ -40,7 +40,7 @@ from tracking.camera import Camera
 from tracking.poses import rotation_angle
 from tracking.session import AnchorSpec
 from tracking.slam.features import FeatureExtractor, Features
-from tracking.slam.flow import Tracks, follow, seed_on_plane
+from tracking.slam.flow import Tracks, edge_sharpness, follow, seed_on_plane
 from tracking.slam.fusion import PoseBlender, fuse_pose
 from tracking.slam.map import Map
 from tracking.slam.mapping import KeyframeRequest, LocalMapper
@@ -84,12 +84,14 @@ class Tracker:
     optical flow instead of detecting and matching ORB features (much cheaper per frame).
     flow: when the anchors and the map both fail on a frame after a tracked one, follow keypoints
     (map points, else points seeded on the anchors' plane) from the last frame by optical flow.
-    blur_px, blur_gate_px, blur_hold_s: under fast motion markers are smeared and their corners can
-    be off by pixels. When the anchors may have moved `blur_px` pixels or more since the last frame,
-    one frame of flow from the last frame is computed as well; if the flow confirms the image moved
-    that far and the two poses disagree by more than `blur_gate_px` on the anchors' corners, the
-    flow pose is used, for at most `blur_hold_s` seconds since the anchors were last accepted (after
-    that they win again, so flow drift is always bounded by the markers).
+    blur_px, blur_sharpness, blur_gate_px, blur_hold_s: under fast motion markers are smeared and
+    their corners can be off by pixels. When the anchors may have moved `blur_px` pixels or more
+    since the last frame, one frame of flow from the last frame is computed as well; if the flow
+    confirms the image moved that far, the markers' edges across the motion are soft
+    (`flow.edge_sharpness` below `blur_sharpness`: smeared over more than about 1/blur_sharpness
+    pixels) and the flow pose puts the marker corners more than `blur_gate_px` from where they were
+    detected, the flow pose is used, for at most `blur_hold_s` seconds since the anchors were last
+    accepted (after that they win again, so flow drift is always bounded by the markers).
     flow_hold_s: the longest that flow alone (neither anchors nor map confirming) carries the pose;
     after that the frame is lost until the anchors or the map take it up again.
     anchor_first: while the anchors are in view, their tracker's pose (raw for 12+ corners, filtered
@@ -104,7 +106,8 @@ class Tracker:
                  keyframe_parallax: float = 0.08, corner_weight: float = 4.0, corner_share: float = 1 / 3,
                  filter: bool = True, max_pending: int = 2, max_lag: int = 3,
                  klt: bool = True, flow: bool = True, anchor_first: bool = True, keypoint_every: int = 10,
-                 blur_px: float = 10.0, blur_gate_px: float = 1.0, blur_hold_s: float = 0.5,
+                 blur_px: float = 10.0, blur_sharpness: float = 0.15, blur_gate_px: float = 1.0,
+                 blur_hold_s: float = 0.5,
                  flow_hold_s: float = 2.0):
         from tracking.anchors import AnchorTracker  # the anchors package is built alongside
 
@@ -124,7 +127,8 @@ class Tracker:
         self.max_lag = max(1, int(max_lag))
         self.klt = klt
         self.flow = flow
-        self.blur_px, self.blur_gate_px, self.blur_hold_s = blur_px, blur_gate_px, blur_hold_s
+        self.blur_px, self.blur_sharpness = blur_px, blur_sharpness
+        self.blur_gate_px, self.blur_hold_s = blur_gate_px, blur_hold_s
         self.flow_hold_s = flow_hold_s
         self.anchor_first = bool(anchor_first)
         self.keypoint_every = max(1, int(keypoint_every))
@@ -271,7 +275,7 @@ class Tracker:
             if (pose is not None and self._frame - self._full_frame < self.keypoint_every
                     and self._plausible(pose, self.motion.last, t)):
                 got = self._follow_from_last(gray, t) if self._moving_fast(ar, t) else None
-                if self._smeared(ar, got, t):
+                if self._smeared(ar, got, gray, t):
                     return self._flow_result(got, t, t0, int(ar.markers))
                 self._flow = None   # flow restarts from the next full frame (or from this image)
                 return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, int(ar.markers),
@@ -296,7 +300,7 @@ class Tracker:
             else:
                 self._since_detect += 1
             usable = self._anchor_usable(ar) and self._plausible(self._anchor_output(ar), self.motion.last, t)
-            if got is not None and (not usable or self._smeared(ar, got, t)):
+            if got is not None and (not usable or self._smeared(ar, got, gray, t)):
                 return self._flow_result(got, t, t0, int(ar.markers) if ar is not None else 0)
         self._full_frame = self._frame
         fut = self._pool.submit(self._anchors.process, gray, t) if detect else None
@@ -313,7 +317,7 @@ class Tracker:
         if (not flow_tried and self._anchor_usable(ar)
                 and self._plausible(self._anchor_output(ar), self.motion.last, t) and self._moving_fast(ar, t)):
             got, flow_tried = self._follow_from_last(gray, t), True
-            if self._smeared(ar, got, t):
+            if self._smeared(ar, got, gray, t):
                 return self._flow_result(got, t, t0, int(ar.markers))
 
         anchor_pose = None
@@ -441,7 +445,9 @@ class Tracker:
         """One frame of optical flow from the last tracked frame: its flow points or map inliers,
         topped up with points seeded on the anchors' plane in the last image. (pose, tracks now
         measured in `gray`), or None when the flow does not hold or the pose is implausible."""
-        if (not self.flow or self._lost > 0 or self.motion.last is None or self._prev_gray is None
+        # no velocity yet (just (re)acquired): a flow started at zero motion can lock onto a look-alike
+        # of each point (tiles, any repeated texture) and give a wrong pose that holds together
+        if (not self.flow or self._lost > 0 or self.motion.velocity is None or self._prev_gray is None
                 or self._prev_gray.shape != gray.shape
                 or (self._via_flow and t - self._flow_start > self.flow_hold_s)):
             return None
@@ -453,17 +459,21 @@ class Tracker:
             return None
         return got
 
-    def _smeared(self, ar, got, t) -> bool:
+    def _smeared(self, ar, got, gray, t) -> bool:
         """Whether the anchors' measurement this frame is to be distrusted in favour of the flow pose
-        `got` (see blur_px / blur_gate_px / blur_hold_s): the image moved fast (the flow measures it
-        without any pose), recently anchored, and the two poses disagree on the anchors' corners."""
+        `got` (see blur_px / blur_sharpness / blur_gate_px / blur_hold_s): recently anchored, the
+        image moved fast (the flow measures it without any pose), the markers' edges are smeared
+        along that motion, and the flow pose disagrees with the detected corners."""
         if got is None or self._anchor_t is None or t - self._anchor_t > self.blur_hold_s:
             return False
-        if got[1].moved is None or float(np.median(got[1].moved)) < self.blur_px:
+        motion = got[1].image_motion()
+        if motion is None or np.linalg.norm(motion) < self.blur_px:
             return False
+        seen = np.asarray(ar.image_points, float).reshape(-1, 2)
+        if not edge_sharpness(gray, seen, motion) < self.blur_sharpness:
+            return False   # sharp (or unmeasurable) markers are measured where they are
         corners = np.asarray(ar.object_points, float).reshape(-1, 3)
-        gap = np.linalg.norm(self.camera.project_world(corners, self._anchor_output(ar))
-                             - self.camera.project_world(corners, got[0]), axis=1).max()
+        gap = float(np.median(np.linalg.norm(self.camera.project_world(corners, got[0]) - seen, axis=1)))
         return gap > self.blur_gate_px
 
     def _moving_fast(self, ar, t) -> bool:

@@ -16,7 +16,7 @@ from tracking.evaluation import TrajectoryMetrics, evaluate
 
 def scene_dict(name: str, keys: list[dict], fps: float = 30.0, width: int = 640, height: int = 480,
                noise: float = 1.5, occluder: dict | None = None, seed: int = 5, marker_length: float = 0.08,
-               supersample: int = 1, dist: list[float] | None = None) -> dict:
+               supersample: int = 1, dist: list[float] | None = None, desk_style: str = "desk") -> dict:
     """A synth scene JSON with a `keyframes` trajectory (keys: t, eye, target)."""
     duration = float(keys[-1]["t"])
     effects = {"noise": noise}
@@ -28,7 +28,7 @@ def scene_dict(name: str, keys: list[dict], fps: float = 30.0, width: int = 640,
     return {
         "name": name, "seed": seed, "fps": fps, "duration": duration, "camera": cam,
         "anchors": [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 3, "length": marker_length}],
-        "desk": {"size": [1.6, 1.2], "ppm": 1500, "seed": seed},
+        "desk": {"size": [1.6, 1.2], "ppm": 1500, "seed": seed, "style": desk_style},
         "trajectory": {"kind": "keyframes", "keys": keys},
         "effects": effects, "supersample": supersample,
     }

@@ -6,7 +6,7 @@ Scene JSON (all keys but `anchors` and `trajectory` optional; metres, seconds, d
      "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": [k1, k2, p1, p2, k3]}
                or {"width": ..., "height": ..., "K": [[...]], "dist": [...]},
      "anchors": [ ...exactly as in session.json... ],
-     "desk": {"size": [1.4, 1.0], "ppm": 2000, "seed": 3, "style": "desk" or "bed"},
+     "desk": {"size": [1.4, 1.0], "ppm": 2000, "seed": 3, "style": "desk", "bed" or "tiles"},
      "trajectory": {"kind": "orbit", ...}            (see tracking.synth.trajectory),
      "effects": {"noise": 2.0, "motion_blur": 0.0, "blur_samples": 7,
                  "exposure": {"amplitude": 0.2, "period": 2.0},

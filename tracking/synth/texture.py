@@ -47,7 +47,24 @@ STYLES = {
     # base colour range, shape colour saturation (0 grey .. 1 full), noise amplitude factor
     "desk": ((70, 150), 0.75, 1.0),
     "bed": ((35, 60), 0.2, 0.6),  # a dark textured PEI sheet with faint prints and scratches
+    "tiles": ((150, 190), 0.0, 0.1),  # identical tiles, each with the same motif: repeated texture
 }
+TILE_M = 0.04  # tile period of the "tiles" style, metres
+
+
+def _tiles(w: int, h: int, ppm: float, rng: np.random.Generator, noise_amp: float) -> np.ndarray:
+    """A floor of identical square tiles (grout lines, the same motif in every tile) with faint
+    noise: every corner has many exact look-alikes, the hard case for descriptor matching."""
+    p = TILE_M * ppm
+    tile = np.full((int(round(p)), int(round(p)), 3), 175, np.float32)
+    n = tile.shape[0]
+    cv2.rectangle(tile, (0, 0), (n - 1, n - 1), (90, 95, 100), max(1, int(0.06 * n)))
+    cv2.circle(tile, (int(0.35 * n), int(0.4 * n)), int(0.14 * n), (60, 110, 160), -1, cv2.LINE_AA)
+    cv2.line(tile, (int(0.55 * n), int(0.2 * n)), (int(0.8 * n), int(0.75 * n)), (40, 40, 40),
+             max(1, int(0.05 * n)), cv2.LINE_AA)
+    img = np.tile(tile, (h // n + 1, w // n + 1, 1))[:h, :w].copy()
+    img += _noise_layer(rng, h, w, 16)[..., None] * 255 * 0.02 * noise_amp
+    return np.clip(img, 0, 255).astype(np.uint8)
 
 
 def make_desk_texture(width_m: float, height_m: float, ppm: float, seed: int = 0,
@@ -62,6 +79,9 @@ def make_desk_texture(width_m: float, height_m: float, ppm: float, seed: int = 0
     (lo, hi), saturation, noise_amp = STYLES[style]
     rng = np.random.default_rng(seed)
     w, h = int(round(width_m * ppm)), int(round(height_m * ppm))
+    if style == "tiles":
+        return DeskTexture(_tiles(w, h, ppm, rng, noise_amp), -width_m / 2 if x_min is None else x_min,
+                           height_m / 2 if y_max is None else y_max, float(ppm))
     base = np.array(rng.uniform(lo, hi, 3), dtype=np.float32)
     img = np.empty((h, w, 3), np.float32)
     img[:] = base
