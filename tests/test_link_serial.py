@@ -80,6 +80,20 @@ def test_every_line_once_in_order_under_default_faults(window):
     assert state.layer == 2 and state.layer_count == 3
 
 
+def test_slow_command_with_a_cancel_event_is_not_sent_again():
+    """A dwell (or homing, or a long move) answers only when done; with a cancel Event to watch (as the
+    GUI gives) the host looks at it every 0.25 s, which must not count as the printer not answering."""
+    gcode = make_gcode(60)
+    gcode.insert(gcode.index(";LAYER:1") + 1, "G4 P1500")
+    with VirtualPrinterPty(simulated_errors=[]) as vp:
+        p = connect(vp, timeout=5.0)
+        state = p.print_gcode(gcode, cancel=threading.Event())
+        p.close()
+        assert program_commands(vp.executed, gcode) == expected_commands(gcode)
+    assert state.status == "done"
+    assert p.timeouts == 0
+
+
 @pytest.mark.parametrize("window", [1, 4])
 def test_every_line_once_in_order_under_line_noise(window):
     """Damaged bytes on the wire (one line in 7) on top of the default faults."""

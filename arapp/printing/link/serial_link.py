@@ -462,11 +462,14 @@ class SerialPrinter(PrintLink):
                     deadline = last_temp_poll + self.temp_interval
                 else:
                     deadline = now + self.timeout
+                wake = deadline
                 if cancel is not None and not cancelling:
-                    deadline = min(deadline, now + 0.25)  # an external Event cannot wake the queue
-                ev = self._get_event(deadline)
+                    wake = min(deadline, now + 0.25)  # an external Event cannot wake the queue: look at it
+                ev = self._get_event(wake)
                 if ev is None:
-                    if self._inflight and time.monotonic() >= deadline - 1e-3:
+                    if time.monotonic() < deadline - 1e-3:
+                        pass   # only woken to look at the cancel Event (checked at the loop's top)
+                    elif self._inflight:
                         consecutive_timeouts += 1
                         self.timeouts += 1
                         if consecutive_timeouts > self.max_timeouts:
