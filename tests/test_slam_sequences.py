@@ -92,7 +92,7 @@ def test_repeated_texture_gives_no_wrong_pose():
 def test_flow_alone_carries_the_pose_for_a_bounded_time():
     """Neither anchors nor map in sight: flow holds the last pose for flow_hold_s, then the frame is lost."""
     frames, session = recording("fast_motion", slice(0, 21))
-    with Tracker(session.camera, session.anchors, flow_hold_s=1.0) as tr:
+    with Tracker(session.camera, session.anchors, flow_hold_s=1.0, threaded=False) as tr:
         states = [tr.process(img, t).state for t, img, _ in frames]
         assert states[-1] == "slam" and "marker" in states
         start = frames[states.index("slam")][0]
