@@ -66,6 +66,31 @@ def test_board_ground_truth_is_exact_to_subpixel():
     assert np.abs(err.mean(axis=0)).max() < 0.05  # no bias: pixel-centre and distortion conventions agree
 
 
+@pytest.mark.parametrize("squares", [(5, 4), (6, 5)])   # even and odd row counts (OpenCV's two layouts)
+def test_charuco_ground_truth_matches_the_charuco_detector(squares):
+    board = {"kind": "charuco", "dictionary": "DICT_4X4_50", "squares_x": squares[0], "squares_y": squares[1],
+             "square_length": 0.03, "marker_length": 0.022}
+    sc = clean_scene([board], {"kind": "orbit", "azimuth_start": -130, "azimuth_end": -50, "distance": 0.42,
+                               "elevation": 60, "elevation_swing": 10})
+    r = DeskRenderer(sc)
+    err, counts = corner_errors(r, [0, 30])            # the ArUco markers in the white squares
+    assert min(counts) == squares[0] * squares[1] // 2
+    # (their refined corners are pulled a little by the chessboard squares they touch: under a pixel)
+    assert np.abs(err).max() < 1.0 and np.abs(err.mean(axis=0)).max() < 0.1
+    # the chessboard corners, which carry a ChArUco pose, to a fraction of a pixel
+    from tracking.anchors.model import charuco_board
+
+    cb = charuco_board(sc.anchors[0])
+    det = cv2.aruco.CharucoDetector(cb)
+    chess = np.asarray(cb.getChessboardCorners(), float)
+    for i in (0, 30):
+        img, pose, _ = r.render(i)
+        cc, ci, _, _ = det.detectBoard(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY))
+        assert ci is not None and len(ci) == (squares[0] - 1) * (squares[1] - 1)
+        gt = sc.camera.project_world(chess[ci.ravel()], pose)
+        assert np.abs(cc.reshape(-1, 2) - gt).max() < 0.3
+
+
 def test_single_marker_ground_truth_and_world_side():
     marker = {"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 42, "length": 0.05}
     sc = clean_scene([marker], {"kind": "approach", "azimuth": -70, "elevation": 65, "distance_start": 0.5,
@@ -196,7 +221,7 @@ def test_scene_errors_name_the_field():
         ({**good, "camera": {"width": 640, "height": 480, "hfov_deg": 200}}, r"scene.camera.hfov_deg"),
         ({**good, "desk": {"style": "marble"}}, r"scene.desk.style: must be one of"),
         ({**good, "anchors": [{"kind": "charuco", "dictionary": "DICT_4X4_50", "squares_x": 5, "squares_y": 4,
-                               "square_length": 0.03, "marker_length": 0.02}]}, r"cannot print a 'charuco' anchor"),
+                               "square_length": 0.03, "marker_length": 0.04}]}, r"marker_length 0.04 must be smaller"),
     ]
     tilted = np.eye(4)
     tilted[:3, :3] = cv2.Rodrigues(np.array([0.3, 0.0, 0.0]))[0]

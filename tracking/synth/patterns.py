@@ -1,7 +1,7 @@
 """Printed anchors as exact cell patterns in their own anchor frame.
 
 Each anchor becomes a `PrintedPattern`: a rectangular array of square tiles
-(one tile per ArUco marker or QR symbol), each tile a grid of black/white
+(one tile per ArUco marker or QR symbol, or per ChArUco square), each tile a grid of black/white
 cells, laid out in "print coordinates" (p, q): p to the right and q down the
 sheet as printed, metres, origin at the first tile's top-left outer corner.
 `anchor_xy = origin + (p * sx, q * sy)` maps them into the anchor frame
@@ -85,8 +85,25 @@ def qr_modules(text: str) -> np.ndarray:
     return (sym > 127).astype(np.uint8)
 
 
+def _charuco_cells(squares_x: int, squares_y: int, square: float, marker: float, bits: int) -> int:
+    """Cells per ChArUco square such that each marker spans a whole number of cells per bit and sits
+    centred in its square (so OpenCV's board image is exact at that size); the ratio marker/square is
+    kept to within 0.5 % (or as close as 400 cells per square allow)."""
+    best, best_err = None, np.inf
+    for cells in range(2 * bits, 401):
+        m = round(marker / square * cells / bits) * bits   # marker cells: a multiple of the bit count
+        if m <= 0 or m >= cells or (cells - m) % 2:
+            continue
+        err = abs(m / cells - marker / square)
+        if err < best_err - 1e-12:
+            best, best_err = cells, err
+        if err <= 0.005 * marker / square and cells >= 60:
+            return cells
+    return best
+
+
 def pattern_for(anchor: AnchorSpec) -> PrintedPattern:
-    """The printed pattern of an anchor (aruco, aruco_board, qr)."""
+    """The printed pattern of an anchor (aruco, aruco_board, charuco, qr)."""
     if anchor.kind == "aruco":
         L = anchor.length
         tiles = _aruco_bits(anchor.dictionary_id, anchor.id)[None, None]
@@ -106,7 +123,19 @@ def pattern_for(anchor: AnchorSpec) -> PrintedPattern:
             tiles[k // cols, k % cols] = _aruco_bits(anchor.dictionary_id, mid)
         # GridBoard frame: origin at the first marker's outer corner, x right, y down, z into the paper.
         return PrintedPattern(tiles, L + s, L, (0.0, 0.0), 1.0, 1.0, margin=max(s, 0.3 * L), normal_sign=-1.0)
-    raise SessionError(f"synth: cannot print a {anchor.kind!r} anchor yet; use aruco, aruco_board or qr")
+    if anchor.kind == "charuco":
+        from tracking.anchors.model import charuco_board
+
+        board = charuco_board(anchor)
+        sq, cols, rows = anchor.square_length, anchor.squares_x, anchor.squares_y
+        bits = board.getDictionary().markerSize + 2
+        n = _charuco_cells(cols, rows, sq, anchor.marker_length, bits)
+        img = board.generateImage((cols * n, rows * n), marginSize=0, borderBits=1)
+        # one tile per chessboard square, in OpenCV's own drawing (pattern variant included)
+        tiles = (img.reshape(rows, n, cols, n).transpose(0, 2, 1, 3) > 127).astype(np.uint8)
+        # CharucoBoard frame: origin at the board's top-left outer corner, x right, y down, z into the paper.
+        return PrintedPattern(tiles, sq, sq, (0.0, 0.0), 1.0, 1.0, margin=0.5 * sq, normal_sign=-1.0)
+    raise SessionError(f"synth: cannot print a {anchor.kind!r} anchor; use aruco, aruco_board, charuco or qr")
 
 
 def anchor_corners(anchor: AnchorSpec) -> np.ndarray:
@@ -123,4 +152,8 @@ def anchor_corners(anchor: AnchorSpec) -> np.ndarray:
         board = cv2.aruco.GridBoard((anchor.markers_x, anchor.markers_y), anchor.marker_length,
                                     anchor.separation, d, np.array(anchor.marker_ids()))
         return np.asarray(board.getObjPoints(), float).reshape(-1, 4, 3)
+    if anchor.kind == "charuco":
+        from tracking.anchors.model import charuco_board
+
+        return np.asarray(charuco_board(anchor).getObjPoints(), float).reshape(-1, 4, 3)
     raise SessionError(f"anchor_corners: {anchor.kind!r} anchors are not supported")
