@@ -4,6 +4,9 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 ARAPP  := $(VENV)/bin/arapp
 STAMP  := $(VENV)/.arapp-installed
+# The real OctoPrint server for the REST-link tests lives in its own environment (see the requirements file).
+OCTO   := .venv-octoprint
+OCTO_STAMP := $(OCTO)/.installed
 
 export PYOPENGL_PLATFORM ?= egl
 export QT_QPA_PLATFORM ?= offscreen
@@ -11,7 +14,7 @@ export MPLBACKEND ?= Agg
 
 .PHONY: setup demo test bench clean
 
-setup: $(STAMP)
+setup: $(STAMP) $(OCTO_STAMP)
 
 $(STAMP): pyproject.toml constraints.txt requirements-peers.txt scripts/system-deps.sh
 	./scripts/system-deps.sh prusa-slicer
@@ -24,14 +27,20 @@ $(STAMP): pyproject.toml constraints.txt requirements-peers.txt scripts/system-d
 	$(PY) -m pip install -q 'PyOpenGL==3.1.10' 2>&1 | grep -v "dependency conflicts\|pyrender 0.1.45 requires\|resolver does not" || true
 	touch $(STAMP)
 
+$(OCTO_STAMP): requirements-octoprint-server.txt
+	test -x $(OCTO)/bin/python || $(PYTHON) -m venv $(OCTO)
+	$(OCTO)/bin/python -m pip install -q --upgrade pip
+	$(OCTO)/bin/python -m pip install -q -r requirements-octoprint-server.txt
+	touch $(OCTO_STAMP)
+
 demo: $(STAMP)
 	$(ARAPP) demo --out out/demo
 
-test: $(STAMP)
+test: $(STAMP) $(OCTO_STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider tests
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py --out BENCHMARKS.md
 
 clean:
-	rm -rf $(VENV) out
+	rm -rf $(VENV) $(OCTO) out

@@ -1,11 +1,12 @@
 """OctoPrint link against a local HTTP server speaking OctoPrint's REST API.
 
-The real OctoPrint server (1.11.8) starts in ~8 s here and the link was run
-against it (upload + print, progress, cancel), but it cannot live in the test
-environment: its dependency `limits` pins packaging<25 while the project pins
-packaging 26.3. So these tests use a stand-in server whose replies are copies
-of the real server's (same JSON shapes, status codes 201/204/403/409, the
-job-state strings "Operational", "Printing", "Paused", "Cancelling").
+test_octoprint_server.py runs the link against the real OctoPrint server (its own
+environment, .venv-octoprint). This stand-in, fast and fully scripted, checks what
+arrives at the server in detail (form fields, the API key header), pause and
+resume at chosen moments, the `arapp print` command line and the key file. Its
+replies are copies of the real server's (same JSON shapes,
+status codes 201/204/403/409, the job-state strings "Operational", "Printing",
+"Paused", "Cancelling").
 The stand-in runs the job by advancing the file position through the uploaded
 bytes; the tests check what arrived (the exact G-code, the form fields, the
 API key header) and what the link reported.
