@@ -65,6 +65,24 @@ class TrackResult:
     ms: float
 
 
+@dataclass
+class _Fit:
+    """A frame's pose fit on a full frame: `pose` world_from_camera, `state` ("marker" / "slam"),
+    `inliers` count; the map points it used: `point_ids`, their features `feature_idx` and world
+    positions `points` (N,3); `visible` the map points matched at all; `source`/`out_pose` what to
+    show instead of `pose` (the anchors' own pose), when set."""
+
+    pose: np.ndarray
+    state: str
+    inliers: int
+    point_ids: np.ndarray
+    feature_idx: np.ndarray
+    points: np.ndarray
+    visible: np.ndarray
+    source: str | None = None
+    out_pose: np.ndarray | None = None
+
+
 class Tracker:
     """Anchors + keypoint SLAM. See the module docstring; parameters:
 
@@ -320,92 +338,95 @@ class Tracker:
             if self._smeared(ar, got, gray, t):
                 return self._flow_result(got, t, t0, int(ar.markers))
 
-        anchor_pose = None
-        corners_w = np.zeros((0, 3))
-        corners_uv = np.zeros((0, 2))
-        markers = 0
-        if ar is not None and ar.raw_world_from_camera is not None and len(ar.object_points) >= 4:
-            anchor_pose = np.asarray(ar.raw_world_from_camera, float)
-            corners_w = np.asarray(ar.object_points, float).reshape(-1, 3)
-            corners_uv = self.camera.undistort_points(np.asarray(ar.image_points, float).reshape(-1, 2))
-            markers = int(ar.markers)
-
+        corners_w, corners_uv, markers = self._anchor_points(ar)
         pred = self.motion.predict(t)
         ids, X, D = self.map.arrays()
-        pose, state, inliers, inl_ids, inl_feat = None, "lost", 0, np.zeros(0, int), np.zeros(0, int)
-        inl_xyz = np.zeros((0, 3))
-        source, out_pose = None, None
-
-        if anchor_pose is not None:
-            init = anchor_pose
-            if pred is not None and self._lost == 0 and not self._plausible(anchor_pose, pred, t):
-                init = pred  # a flipped planar solution: let the corners pull from the tracked pose
-            pi, fi = self._match(init, X, D, feats, self.radius)
-            share = 0.8 if young else self.corner_share   # a young map must not pull the markers
-            p, cin, min_, _ = fuse_pose(self.K, init, corners_w, corners_uv, X[pi], feats.und[fi], self.corner_weight,
-                                      corner_share=share)
-            if cin.any() and share < 0.8:
-                cerr = np.linalg.norm(self.camera.project_world(corners_w, p) - self.camera.project_world(
-                    corners_w, anchor_pose), axis=1).max()
-                if cerr > 1.5:   # map and markers disagree: the markers win, BA corrects the map
-                    p, cin, min_, _ = fuse_pose(self.K, init, corners_w, corners_uv, X[pi], feats.und[fi],
-                                                self.corner_weight, corner_share=0.8)
-            if cin.mean() < 0.75 and init is not anchor_pose:
-                p, cin, min_, _ = fuse_pose(self.K, anchor_pose, corners_w, corners_uv, X[pi], feats.und[fi],
-                                            self.corner_weight, corner_share=self.corner_share)
-            if cin.mean() < 0.75:
-                # the map disagrees with the markers: trust the markers, the map gets corrected by BA
-                p, cin, _ = refine_pose(self.K, anchor_pose, corners_w, corners_uv)
-                min_ = np.zeros(pi.size, bool)
-            pose, state = p, "marker"
-            if (self.anchor_first and self._anchor_usable(ar)
-                    and (self._lost > 0 or self._plausible(self._anchor_output(ar), self.motion.last, t))):
-                # the anchors' pose is what is shown while they are in view (a jump the motion cannot
-                # explain is left to the joint fit); the fit above places this frame in the map
-                source = "anchors"
-                out_pose = self._anchor_output(ar)
-            elif min_.sum() < self.min_inliers and ar.world_from_camera is not None and len(corners_w) < 12:
-                # the map does not help yet and one marker's pose is noisy: the anchors' filtered pose
-                # (a board's many corners are precise as they are; its filter would only add lag)
-                source = "anchors"
-                out_pose = np.asarray(ar.world_from_camera, float)
-            inliers = int(cin.sum() + min_.sum())
-            inl_ids, inl_feat, inl_xyz = ids[pi[min_]], fi[min_], X[pi[min_]]
-            visible = ids[pi]
+        if len(corners_w):
+            fit = self._fuse_with_anchors(ar, corners_w, corners_uv, feats, pred, ids, X, D, young, t)
         else:
-            visible = np.zeros(0, int)
-            if pred is not None and X.shape[0] >= self.min_inliers:
-                p, pi, fi, inl = self._track_map(pred, X, D, feats)
-                if p is not None and self._plausible(p, self.motion.last, t):
-                    pose, state, inliers = p, "slam", int(inl.sum())
-                    inl_ids, inl_feat, inl_xyz = ids[pi[inl]], fi[inl], X[pi[inl]]
-                    visible = ids[pi]
-            if pose is None and X.shape[0] >= self.min_inliers and len(feats) >= self.min_inliers:
-                p, n = relocalise(self.map, feats, self.K, near=self.motion.last)
-                if p is not None:
-                    # confirm by projection matching from the relocalised pose
-                    p2, pi, fi, inl = self._track_map(p, X, D, feats)
-                    if p2 is not None and (self.motion.last is None or self._plausible(p2, self.motion.last, t, lost=True)):
-                        pose, state, inliers = p2, "slam", int(inl.sum())
-                        inl_ids, inl_feat, inl_xyz = ids[pi[inl]], fi[inl], X[pi[inl]]
-                        visible = ids[pi]
-
-        if pose is None:
+            fit = self._from_map(feats, pred, ids, X, D, t)
+        if fit is None:
             if not flow_tried:
                 got = self._follow_from_last(gray, t)
             return self._flow_result(got, t, t0, markers) if got is not None else self._lost_frame(t0, markers)
 
-        self.map.count_matches(visible, inl_ids)
-        self._maybe_keyframe(t, pose, feats, inl_ids, inl_feat, corners_w, corners_uv, state, inl_xyz, inliers)
+        self.map.count_matches(fit.visible, fit.point_ids)
+        self._maybe_keyframe(t, fit.pose, feats, fit.point_ids, fit.feature_idx, corners_w, corners_uv, fit.state,
+                             fit.points, fit.inliers)
         # keypoints to follow by optical flow until the next full frame
         self._flow = None
-        if inl_feat.size:
+        n = fit.feature_idx.size
+        if n:
             # a spread subset is plenty for the pose and keeps the flow cheap
-            sel = np.arange(inl_feat.size) if inl_feat.size <= MAX_TRACKS else np.linspace(
-                0, inl_feat.size - 1, MAX_TRACKS).astype(int)
-            self._flow = Tracks(gray, feats.xy[inl_feat[sel]].astype(np.float32), inl_xyz[sel].copy())
-        self._full_tracks = int(min(inl_feat.size, MAX_TRACKS))
-        return self._finish(pose, pred, state, source, out_pose, markers, inliers, t, t0)
+            sel = np.arange(n) if n <= MAX_TRACKS else np.linspace(0, n - 1, MAX_TRACKS).astype(int)
+            self._flow = Tracks(gray, feats.xy[fit.feature_idx[sel]].astype(np.float32), fit.points[sel].copy())
+        self._full_tracks = int(min(n, MAX_TRACKS))
+        return self._finish(fit.pose, pred, fit.state, fit.source, fit.out_pose, markers, fit.inliers, t, t0)
+
+    def _anchor_points(self, ar) -> tuple[np.ndarray, np.ndarray, int]:
+        """The anchors' measured corners this frame: world points (N,3), undistorted pixels (N,2) and the
+        marker count; empty when the anchors gave no pose."""
+        if ar is None or ar.raw_world_from_camera is None or len(ar.object_points) < 4:
+            return np.zeros((0, 3)), np.zeros((0, 2)), 0
+        corners_uv = self.camera.undistort_points(np.asarray(ar.image_points, float).reshape(-1, 2))
+        return np.asarray(ar.object_points, float).reshape(-1, 3), corners_uv, int(ar.markers)
+
+    def _fuse_with_anchors(self, ar, corners_w, corners_uv, feats, pred, ids, X, D, young, t) -> _Fit:
+        """Anchors seen: one robust fit of their corners and the map points matched near them (the
+        corners dominate; where the map disagrees, the markers win and bundle adjustment corrects the
+        map). The anchors' own pose is what is shown while they are in view."""
+        anchor_pose = np.asarray(ar.raw_world_from_camera, float)
+        init = anchor_pose
+        if pred is not None and self._lost == 0 and not self._plausible(anchor_pose, pred, t):
+            init = pred  # a flipped planar solution: let the corners pull from the tracked pose
+        pi, fi = self._match(init, X, D, feats, self.radius)
+        share = 0.8 if young else self.corner_share   # a young map must not pull the markers
+        p, cin, min_, _ = fuse_pose(self.K, init, corners_w, corners_uv, X[pi], feats.und[fi], self.corner_weight,
+                                    corner_share=share)
+        if cin.any() and share < 0.8:
+            cerr = np.linalg.norm(self.camera.project_world(corners_w, p) - self.camera.project_world(
+                corners_w, anchor_pose), axis=1).max()
+            if cerr > 1.5:   # map and markers disagree: the markers win, BA corrects the map
+                p, cin, min_, _ = fuse_pose(self.K, init, corners_w, corners_uv, X[pi], feats.und[fi],
+                                            self.corner_weight, corner_share=0.8)
+        if cin.mean() < 0.75 and init is not anchor_pose:
+            p, cin, min_, _ = fuse_pose(self.K, anchor_pose, corners_w, corners_uv, X[pi], feats.und[fi],
+                                        self.corner_weight, corner_share=self.corner_share)
+        if cin.mean() < 0.75:
+            # the map disagrees with the markers: trust the markers, the map gets corrected by BA
+            p, cin, _ = refine_pose(self.K, anchor_pose, corners_w, corners_uv)
+            min_ = np.zeros(pi.size, bool)
+        source, out_pose = None, None
+        if (self.anchor_first and self._anchor_usable(ar)
+                and (self._lost > 0 or self._plausible(self._anchor_output(ar), self.motion.last, t))):
+            # the anchors' pose is what is shown while they are in view (a jump the motion cannot
+            # explain is left to the joint fit); the fit above places this frame in the map
+            source, out_pose = "anchors", self._anchor_output(ar)
+        elif min_.sum() < self.min_inliers and ar.world_from_camera is not None and len(corners_w) < 12:
+            # the map does not help yet and one marker's pose is noisy: the anchors' filtered pose
+            # (a board's many corners are precise as they are; its filter would only add lag)
+            source, out_pose = "anchors", np.asarray(ar.world_from_camera, float)
+        return _Fit(p, "marker", int(cin.sum() + min_.sum()), ids[pi[min_]], fi[min_], X[pi[min_]], ids[pi],
+                    source, out_pose)
+
+    def _from_map(self, feats, pred, ids, X, D, t) -> _Fit | None:
+        """No anchors: the pose from map points alone (from the motion's prediction, else by
+        relocalising against keyframes and confirming by projection matching), or None."""
+        if X.shape[0] < self.min_inliers:
+            return None
+        if pred is not None:
+            p, pi, fi, inl = self._track_map(pred, X, D, feats)
+            if p is not None and self._plausible(p, self.motion.last, t):
+                return _Fit(p, "slam", int(inl.sum()), ids[pi[inl]], fi[inl], X[pi[inl]], ids[pi])
+        if len(feats) < self.min_inliers:
+            return None
+        p, _ = relocalise(self.map, feats, self.K, near=self.motion.last)
+        if p is None:
+            return None
+        p2, pi, fi, inl = self._track_map(p, X, D, feats)
+        if p2 is None or not (self.motion.last is None or self._plausible(p2, self.motion.last, t, lost=True)):
+            return None
+        return _Fit(p2, "slam", int(inl.sum()), ids[pi[inl]], fi[inl], X[pi[inl]], ids[pi])
 
     def _finish(self, pose, pred, state, source, out_pose, markers, inliers, t, t0) -> TrackResult:
         self._since_anchor = 0 if state == "marker" else self._since_anchor + 1

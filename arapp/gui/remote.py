@@ -74,7 +74,7 @@ class _Child:
 
     def __init__(self, conn, spec: str, anchors_json: list, speed: float, loop: bool, playing: bool,
                  full_frames: bool, display_size):
-        from arapp.gui.workers import Player, Processor  # noqa: F401 - imported for the threads below
+        from arapp.gui.workers import Player
 
         self.conn = conn
         self.spec = spec

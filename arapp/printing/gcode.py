@@ -111,7 +111,7 @@ def write_gcode(layers: list[LayerToolpaths], settings, profile, header: list[st
     fan_on = False
 
     def travel_to(xy, z):
-        nonlocal e, retracted, pos, time_s, z_now
+        nonlocal retracted, pos, time_s
         dist = math.hypot(xy[0] - pos[0], xy[1] - pos[1]) if pos is not None else float("inf")
         long_travel = dist > settings.retract_min_travel
         if long_travel and settings.retract_length > 0 and not retracted and pos is not None:
