@@ -84,15 +84,15 @@ def overlay_mask(shown) -> np.ndarray:
     return diff > 12
 
 
-def projected_mask(w, shown) -> tuple[np.ndarray, np.ndarray]:
+def projected_mask(w, shown, model=None) -> tuple[np.ndarray, np.ndarray]:
     """Filled silhouette of the displayed mesh by cv2.projectPoints at the pose the frame was drawn with,
-    and the projected vertices."""
+    and the projected vertices (`model`: the model as placed, default the window's)."""
     from arapp.placement import world_from_model
     from tracking.poses import invert
 
     info = w.source_info
     mesh = w.mesh_lines[0]
-    wfm = world_from_model(info.anchors[0], w.model)
+    wfm = world_from_model(info.anchors[0], w.model if model is None else model)
     cfm = invert(shown.result.world_from_camera) @ wfm  # a similarity (model units -> metres)
     in_camera = np.asarray(mesh.vertices, float) @ cfm[:3, :3].T + cfm[:3, 3]
     assert in_camera[:, 2].min() > 0.05
@@ -458,3 +458,72 @@ def test_selected_control_point_is_ringed_in_the_view(qtbot, window, recording):
     assert (colour.red(), colour.green(), colour.blue()) == pytest.approx((255, 240, 0), abs=40)
     # and the full-size composite the pipeline made is untouched by the ring
     assert not np.all(shown.result.image[int(uv[1]), int(uv[0])] == (0, 240, 255))
+
+
+def test_dragging_on_the_view_places_the_model(qtbot, window, recording):
+    """Drag moves the model on the marker under the pointer, Shift+drag turns it, the wheel scales it;
+    the fields follow and the view draws it there."""
+    from PySide6.QtCore import QPoint, QPointF
+    from PySide6.QtGui import QWheelEvent
+
+    from arapp.placement import world_from_placement
+
+    window.open_source(str(recording))
+    window.open_model(str(MODELS / "sphere.json"))
+    wait_model(qtbot, window, "sphere.json")
+    qtbot.waitUntil(lambda: window.last_shown is not None and window.last_shown.result.world_from_camera is not None
+                    and overlay_mask(window.last_shown).sum() > 200, timeout=TIMEOUT_MS)
+    window.engine.pause()
+    qtbot.wait(300)
+    shown = window.last_shown
+    info = window.source_info
+    T = world_from_placement(info.anchors[0])
+    start = dict(window.placement)
+    view = window.view
+
+    def widget_pos(x_mm, y_mm) -> QPoint:
+        """Where the paper point (x, y) mm of the placement frame shows in the view (cv2.projectPoints)."""
+        X = (T @ np.array([x_mm / 1000, y_mm / 1000, 0.0, 1.0]))[:3]
+        cw = np.linalg.inv(shown.result.world_from_camera)
+        uv, _ = cv2.projectPoints(X[None], cv2.Rodrigues(cw[:3, :3])[0], cw[:3, 3], info.camera.K, info.camera.dist)
+        u, v = uv.ravel()
+        rect = view.image_rect()
+        return QPoint(round(rect.x() + (u + 0.5) / info.camera.width * rect.width()),
+                      round(rect.y() + (v + 0.5) / info.camera.height * rect.height()))
+
+    # drag from the model's foot 25 mm along the marker's x: the offset follows the pointer
+    qtbot.mousePress(view, Qt.MouseButton.LeftButton, pos=widget_pos(0, 0))
+    qtbot.mouseMove(view, widget_pos(12, 0))
+    qtbot.mouseMove(view, widget_pos(25, 0))
+    qtbot.mouseRelease(view, Qt.MouseButton.LeftButton, pos=widget_pos(25, 0))
+    # a widget pixel is about 0.5 mm on the paper here
+    assert window.placement["offset"][0] == pytest.approx(start["offset"][0] + 25.0, abs=1.5)
+    assert window.placement["offset"][1] == pytest.approx(start["offset"][1], abs=1.5)
+    assert window.model_panel.offset[0].value() == pytest.approx(window.placement["offset"][0], abs=0.06)
+    # the drawn model moved with it: the overlay's centre is where the new foot projects (within a few px)
+    qtbot.waitUntil(lambda: window.last_shown is not shown, timeout=TIMEOUT_MS)
+    qtbot.wait(300)
+    import dataclasses
+
+    from arapp.placement import placement_from_any
+
+    placed = dataclasses.replace(window.model, placement=placement_from_any(window.placement))
+    drawn = overlay_mask(window.last_shown)
+    expected, _ = projected_mask(window, window.last_shown, placed)
+    assert iou(drawn, expected) > 0.85
+    # Shift+drag a quarter turn around the model
+    x0 = window.placement["offset"][0]
+    rz0 = window.placement["rotation_deg"][2]
+    qtbot.mousePress(view, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.ShiftModifier, widget_pos(x0 + 30, 0))
+    qtbot.mouseMove(view, widget_pos(x0, 30))
+    qtbot.mouseRelease(view, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.ShiftModifier, widget_pos(x0, 30))
+    assert window.placement["rotation_deg"][2] == pytest.approx(rz0 + 90.0, abs=3.0)
+    assert window.placement["offset"][0] == pytest.approx(x0, abs=1e-9)
+    # two wheel notches away from the user: 1.1^2 times the size
+    size0 = window.placement["size_mm"]
+    pos = QPointF(widget_pos(x0, 0))
+    ev = QWheelEvent(pos, view.mapToGlobal(pos), QPoint(0, 0), QPoint(0, 240), Qt.MouseButton.NoButton,
+                     Qt.KeyboardModifier.NoModifier, Qt.ScrollPhase.NoScrollPhase, False)
+    view.wheelEvent(ev)
+    assert window.placement["size_mm"] == pytest.approx(size0 * 1.21, rel=1e-6)
+    assert window.model_panel.size.value() == pytest.approx(size0 * 1.21, abs=0.06)

@@ -13,6 +13,8 @@ import os
 from collections import deque
 from pathlib import Path
 
+import numpy as np
+
 from PySide6.QtCore import QSettings, Qt, QTimer, Signal
 from PySide6.QtGui import QAction, QKeySequence
 from PySide6.QtWidgets import (
@@ -97,6 +99,11 @@ class MainWindow(QMainWindow):
         self.view = VideoView()
         self.view.painted.connect(self._painted)
         self.view.resized.connect(lambda w, h: self.engine.set_display_size(w, h) if self.engine else None)
+        self.view.drag_started.connect(self._drag_started)
+        self.view.drag_moved.connect(self._drag_moved)
+        self.view.drag_ended.connect(self._drag_ended)
+        self.view.wheel_steps.connect(self._wheel_scaled)
+        self._drag = None   # (mode, grabbed paper point mm, placement at the grab, pose at the grab)
         self.replay = ReplayBar()
         central = QWidget()
         cl = QVBoxLayout(central)
@@ -523,6 +530,64 @@ class MainWindow(QMainWindow):
         self.placement = dict(placement)
         if self.engine is not None and self.model is not None:
             self.engine.set_placement(dict(placement))
+
+    # -- placing the model with the pointer --------------------------------------------------
+    def _paper_point(self, fx: float, fy: float, pose=None):
+        """The placement-frame point (x, y mm) on the anchor's paper under the frame fraction (fx, fy),
+        seen from `pose` (default: the shown frame's); None without a model, a pose, or a hit."""
+        from arapp.placement import placement_point_at_pixel
+
+        info = self.source_info
+        if self.model is None or info is None or not info.anchors or self.last_shown is None:
+            return None
+        pose = self.last_shown.result.world_from_camera if pose is None else pose
+        if pose is None:
+            return None
+        cam = info.camera
+        pixel = (fx * cam.width - 0.5, fy * cam.height - 0.5)   # pixel centres at integers
+        return placement_point_at_pixel(cam, pose, info.anchors[0], pixel)
+
+    def _drag_started(self, fx: float, fy: float, mode: str) -> None:
+        from arapp.placement import placement_from_any
+
+        grab = self._paper_point(fx, fy)
+        self._drag = None
+        if grab is not None:
+            pose = self.last_shown.result.world_from_camera.copy()
+            self._drag = (mode, grab, placement_from_any(self.placement), pose)
+
+    def _drag_moved(self, fx: float, fy: float) -> None:
+        from arapp.placement import dragged_placement
+
+        if self._drag is None:
+            return
+        mode, grab, start, pose = self._drag
+        # the paper under the pointer in the view being shown (a live camera may move meanwhile)
+        now = self._paper_point(fx, fy)
+        if now is None:
+            now = self._paper_point(fx, fy, pose)
+        if now is not None:
+            self._place(dragged_placement(start, grab, now, mode))
+
+    def _drag_ended(self) -> None:
+        self._drag = None
+
+    def _wheel_scaled(self, steps: float) -> None:
+        from dataclasses import replace
+
+        from arapp.placement import placement_from_any
+
+        if self.model is None or steps == 0:
+            return
+        p = placement_from_any(self.placement)
+        self._place(replace(p, size_mm=float(np.clip(p.size_mm * 1.1 ** steps, 1.0, 1000.0))))
+
+    def _place(self, placement) -> None:
+        """Apply a placement chosen with the pointer: the fields show it, the view draws it."""
+        d = {"size_mm": placement.size_mm, "offset": tuple(placement.offset),
+             "rotation_deg": tuple(placement.rotation_deg)}
+        self.model_panel.set_placement(d)
+        self.set_placement(d)
 
     def set_mode(self, mode: str) -> None:
         self.mode = mode

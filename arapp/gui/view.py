@@ -1,10 +1,11 @@
-"""The live view widget: paints the newest composited frame, scaled to fit, and nothing else."""
+"""The live view widget: paints the newest composited frame, scaled to fit, and reports the pointer
+over it (drag, wheel) as positions within the frame; what a drag means is the main window's business."""
 
 from __future__ import annotations
 
 import time
 
-from PySide6.QtCore import QRectF, Qt, Signal
+from PySide6.QtCore import QPointF, QRectF, Qt, Signal
 from PySide6.QtGui import QColor, QImage, QPainter
 from PySide6.QtWidgets import QSizePolicy, QWidget
 
@@ -19,6 +20,11 @@ class VideoView(QWidget):
 
     painted = Signal(float)
     resized = Signal(int, int)  # device pixels available for the frame
+    # the pointer over the frame, as fractions (0..1) of its width and height
+    drag_started = Signal(float, float, str)   # x, y, mode: "move" (left button) or "turn" (right or Shift)
+    drag_moved = Signal(float, float)
+    drag_ended = Signal()
+    wheel_steps = Signal(float)                # notches, positive away from the user
 
     def __init__(self, parent=None):
         super().__init__(parent)
@@ -28,6 +34,9 @@ class VideoView(QWidget):
         self._image: QImage | None = None
         self._new = False
         self.message = "Open a recording or a camera (File menu), or drop a recording folder here"
+        self._dragging = False
+        self.setToolTip("Drag the model on the marker to move it; Shift+drag or right-drag turns it; "
+                        "the wheel scales it")
 
     def set_image(self, image: QImage | None) -> None:
         self._image = image
@@ -51,6 +60,48 @@ class VideoView(QWidget):
         s = min(self.width() / iw, self.height() / ih)
         w, h = iw * s, ih * s
         return QRectF((self.width() - w) / 2, (self.height() - h) / 2, w, h)
+
+    def frame_fraction(self, pos: QPointF) -> tuple[float, float] | None:
+        """Where widget position `pos` falls in the frame, as fractions of its width and height; None
+        off the frame or with no frame shown."""
+        if self._image is None:
+            return None
+        rect = self.image_rect()
+        fx = (pos.x() - rect.x()) / rect.width()
+        fy = (pos.y() - rect.y()) / rect.height()
+        return (fx, fy) if 0.0 <= fx <= 1.0 and 0.0 <= fy <= 1.0 else None
+
+    def mousePressEvent(self, event):  # noqa: N802
+        f = self.frame_fraction(event.position())
+        if f is None or event.button() not in (Qt.MouseButton.LeftButton, Qt.MouseButton.RightButton):
+            return super().mousePressEvent(event)
+        turn = (event.button() == Qt.MouseButton.RightButton
+                or bool(event.modifiers() & Qt.KeyboardModifier.ShiftModifier))
+        self._dragging = True
+        self.drag_started.emit(f[0], f[1], "turn" if turn else "move")
+        event.accept()
+
+    def mouseMoveEvent(self, event):  # noqa: N802
+        if not self._dragging:
+            return super().mouseMoveEvent(event)
+        rect = self.image_rect()
+        # beyond the frame's edge the pointer still steers (fractions outside 0..1)
+        self.drag_moved.emit((event.position().x() - rect.x()) / rect.width(),
+                             (event.position().y() - rect.y()) / rect.height())
+        event.accept()
+
+    def mouseReleaseEvent(self, event):  # noqa: N802
+        if not self._dragging:
+            return super().mouseReleaseEvent(event)
+        self._dragging = False
+        self.drag_ended.emit()
+        event.accept()
+
+    def wheelEvent(self, event):  # noqa: N802
+        if self._image is None:
+            return super().wheelEvent(event)
+        self.wheel_steps.emit(event.angleDelta().y() / 120.0)
+        event.accept()
 
     def paintEvent(self, event):  # noqa: N802 - Qt's name
         p = QPainter(self)
