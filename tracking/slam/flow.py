@@ -15,6 +15,10 @@ Where the followed points come from:
   triangulates nothing). Seeds off the plane disagree with the others as soon
   as the camera moves sideways and are dropped by the robust fit.
 
+`edge_sharpness` measures how smeared edges are along the motion the flow
+measured: the tracker uses it to tell motion-blurred markers (whose corners
+are off by pixels) from sharp ones.
+
 Pixels: `xy` are distorted image pixels (what the flow measures); the pose fit
 works on undistorted pixels. World points in metres, poses `world_from_camera`.
 """
