@@ -254,3 +254,43 @@ def test_board_and_qr_fused(cam):
     # the QR code's points are in the world frame: they reproject onto its drawn corners
     qr_world = np.asarray(an[1].world_from_anchor) @ np.array([[-0.03, 0.03, 0, 1.0], [0.03, -0.03, 0, 1.0]]).T
     assert any(np.allclose(p, qr_world[:3, 0], atol=0.002) for p in res.object_points)
+
+
+def test_smeared_markers_count_less_in_the_filter():
+    """fast_motion: markers read at the edges of the blurred sweeps have corners off by pixels; their
+    measurements are down-weighted in the filter, which halves the plain way's jitter there."""
+    from pathlib import Path
+
+    from tracking.evaluation import evaluate
+    from tracking.slam.scenes import load_recording
+
+    frames, session = load_recording(Path(__file__).resolve().parents[1] / "recordings" / "fast_motion")
+    gt_t = np.array([f[0] for f in frames])
+    gt = np.array([f[2] for f in frames])
+
+    def score(poses):
+        ok = [i for i, p in enumerate(poses) if p is not None]
+        return evaluate(gt_t[ok], np.array([poses[i] for i in ok]), gt_t, gt)
+
+    def track(**kw):
+        tr = AnchorTracker(session.anchors, session.camera, **kw)
+        return score([tr.process(img, t).world_from_camera for t, img, _ in frames])
+
+    weighted, unweighted = track(), track(smear_sharpness=0.0)   # 0 turns the weighting off
+    plain = score([plain_opencv_pose(session.anchors, session.camera, img) for _, img, _ in frames])
+    assert weighted.tracked == unweighted.tracked == plain.tracked
+    assert weighted.jitter_m < 0.85 * unweighted.jitter_m
+    assert weighted.jitter_m <= 0.5 * plain.jitter_m
+
+
+def test_filter_weight_scales_the_pull_of_a_measurement():
+    f1, f2 = PoseFilter(), PoseFilter()
+    start = np.eye(4)
+    for f in (f1, f2):
+        f.update(start, 0.0, 0.5)
+        f.update(start, 1 / 30, 0.5)
+    moved = np.eye(4)
+    moved[0, 3] = 0.01
+    full = f1.update(moved, 2 / 30, 0.5)[0, 3]
+    light = f2.update(moved, 2 / 30, 0.5, weight=0.2)[0, 3]
+    assert 0 < light < full and light == pytest.approx(0.2 * full, rel=1e-6)

@@ -9,7 +9,8 @@ from scipy.spatial.transform import Rotation
 
 from tracking.camera import Camera
 from tracking.poses import invert, make_pose, rotation_angle
-from tracking.slam.flow import edge_sharpness, follow, lift_to_plane, seed_on_plane
+from tracking.anchors.edges import edge_sharpness
+from tracking.slam.flow import follow, lift_to_plane, seed_on_plane
 
 K = np.array([[540.0, 0, 319.5], [0, 540.0, 239.5], [0, 0, 1]])
 DIST = np.array([-0.08, 0.04, 0.0005, -0.0005, 0.0])

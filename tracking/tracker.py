@@ -40,7 +40,8 @@ from tracking.camera import Camera
 from tracking.poses import rotation_angle
 from tracking.session import AnchorSpec
 from tracking.slam.features import FeatureExtractor, Features
-from tracking.slam.flow import Tracks, edge_sharpness, follow, seed_on_plane
+from tracking.anchors.edges import edge_sharpness
+from tracking.slam.flow import Tracks, follow, seed_on_plane
 from tracking.slam.fusion import PoseBlender, fuse_pose
 from tracking.slam.map import Map
 from tracking.slam.mapping import KeyframeRequest, LocalMapper

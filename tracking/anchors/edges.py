@@ -7,6 +7,10 @@ gradient peak across a straight edge under a symmetric blur lies on the edge.
 So each side is sampled away from its ends, the edge is located along the
 normal (gradient peak, parabolic interpolation), the points are undistorted,
 a line is fitted, and adjacent lines intersect at the corners.
+
+Motion blur is not symmetric: it smears edges along the motion and biases
+corners by pixels. `edge_sharpness` measures that smear, so the anchor filter
+and the SLAM tracker can tell smeared markers from sharp ones.
 """
 
 from __future__ import annotations
@@ -148,3 +152,24 @@ def _intersect(l1, l2):
     if abs(np.linalg.det(A)) < 1e-6:
         return None
     return np.linalg.solve(A, [n1 @ c1, n2 @ c2])
+
+
+def edge_sharpness(gray: np.ndarray, pixels: np.ndarray, direction: np.ndarray) -> float:
+    """How sharp the edges are across `direction` (2,) in the box around `pixels` (N,2) of a grey
+    image: the 99th percentile of the intensity gradient along `direction`, per pixel, over the
+    box's intensity range (2nd to 98th percentile). An edge smeared over L pixels by motion blur
+    scores about 1/L; a sharp one 0.3 to 0.5 (a soft lens about 0.25). NaN when the box is too small
+    or flat."""
+    h, w = gray.shape[:2]
+    lo = np.maximum(np.floor(pixels.min(axis=0)).astype(int) - 4, 0)
+    hi = np.minimum(np.ceil(pixels.max(axis=0)).astype(int) + 5, [w, h])
+    if (hi - lo).min() < 8 or not np.linalg.norm(direction) > 0:
+        return float("nan")
+    roi = gray[lo[1]:hi[1], lo[0]:hi[0]].astype(np.float32)
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    gx = cv2.Sobel(roi, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    gy = cv2.Sobel(roi, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    lo_i, hi_i = np.percentile(roi, [2, 98])
+    if hi_i - lo_i < 10:
+        return float("nan")
+    return float(np.percentile(np.abs(gx * d[0] + gy * d[1]), 99) / (hi_i - lo_i))

@@ -72,13 +72,14 @@ class PoseFilter:
         return T
 
     def update(self, world_from_camera: np.ndarray, t: float, distance: float = 1.0,
-               sigma: float | None = None) -> np.ndarray:
+               sigma: float | None = None, weight: float = 1.0) -> np.ndarray:
         """Filtered pose after the measurement `world_from_camera` at time t (seconds).
 
         `distance` (metres, the scene depth) converts translation to the angle it subtends. `sigma`
         (radians, optional): the measurement's own noise; an innovation many sigmas large is motion the
         filter has not caught up with, and the gain rises toward 1 - (3 sigma / innovation)^2 so that a
-        precise measurement is never lagged behind.
+        precise measurement is never lagged behind. `weight` (0..1) scales the gain for a measurement
+        known to be poor (motion-smeared markers): the prediction counts for more.
         """
         Rm = world_from_camera[:3, :3]
         pm = world_from_camera[:3, 3]
@@ -102,6 +103,7 @@ class PoseFilter:
         a = 1.0 / (1.0 + tau / dt)
         if sigma is not None and m > 3.0 * sigma:
             a = max(a, 1.0 - (3.0 * sigma / m) ** 2)
+        a *= min(max(float(weight), 0.0), 1.0)
         # velocity gain from a capped alpha: one noisy frame must not fling the prediction (and with it
         # the choice between a marker's two IPPE solutions) far off
         av = min(a, self.max_velocity_alpha)

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from tracking.anchors.detect import ArucoDetection, Observation, detector_parameters
+from tracking.anchors.edges import edge_sharpness
 from tracking.anchors.filter import PoseFilter
 from tracking.anchors.model import AnchorModel, build_models, square_corners
 from tracking.anchors.pose import planar_solutions, project, residuals, solve_pose
@@ -60,12 +61,16 @@ class AnchorTracker:
     last frame's markers on their edges where the prediction puts them, without running the detector
     (it falls back to detection when they are not found). outlier_px: reprojection error beyond which a
     corner is an outlier. branch_decay / branch_switch: how evidence for the other IPPE solution of a lone
-    marker accumulates before the tracker switches to it (see _other_branch_wins).
+    marker accumulates before the tracker switches to it (see _other_branch_wins). smear_px /
+    smear_sharpness: a measurement whose markers moved `smear_px` pixels or more since the last frame
+    and whose edges are smeared along that motion (`edges.edge_sharpness` below `smear_sharpness`)
+    counts less in the filter (motion blur biases corners by pixels).
     """
 
     def __init__(self, anchors: list[AnchorSpec], camera: Camera, filter: bool = True, *, roi: bool = True,
                  full_every: int = 10, track_markers: bool = True, outlier_px: float = 3.0, branch_decay: float = 0.8,
-                 branch_switch: float = 6.0, **filter_params):
+                 branch_switch: float = 6.0, smear_px: float = 10.0, smear_sharpness: float = 0.15,
+                 **filter_params):
         if not anchors:
             raise ValueError("AnchorTracker needs at least one anchor (the session's anchors list is empty)")
         self.anchors = list(anchors)
@@ -76,6 +81,7 @@ class AnchorTracker:
         self.qr = QRTracking(self.models, camera)
         self.filter_enabled = bool(filter)
         self.filter = PoseFilter(**filter_params)
+        self.smear_px, self.smear_sharpness = float(smear_px), float(smear_sharpness)
         self.roi = roi
         self.full_every = max(int(full_every), 1)
         self.track_markers = bool(track_markers)
@@ -124,6 +130,22 @@ class AnchorTracker:
             return True
         return False
 
+    def _smear_weight(self, gray, sol, raw) -> float:
+        """Weight (0.04..1) of this frame's measurement in the filter: below 1 when the markers moved
+        `smear_px` or more since the last frame and their edges are smeared along that motion; the
+        weight falls with the square of the sharpness below `smear_sharpness`."""
+        if not self.filter.initialised:
+            return 1.0
+        world = np.asarray(sol.world, float)
+        motion = np.median(self.camera.project_world(world, raw) - self.camera.project_world(world, self.filter.pose()),
+                           axis=0)
+        if np.linalg.norm(motion) < self.smear_px:
+            return 1.0
+        sharp = edge_sharpness(gray, np.asarray(sol.img, float), motion)
+        if not sharp < self.smear_sharpness:
+            return 1.0
+        return float(max(0.2, sharp / self.smear_sharpness) ** 2)
+
     # ------------------------------------------------------------------------------------------------
     def process(self, image: np.ndarray, t: float) -> AnchorResult:
         """Detect the anchors in `image` (BGR or gray uint8, distorted as `camera` says) taken at time t (s)."""
@@ -164,7 +186,7 @@ class AnchorTracker:
             px_sigma = max(sol.rms * np.sqrt(2 * n / max(2 * n - 6, 1)), 0.1)
             lever = np.sqrt(1.0 + (self.camera.fx / extent) ** 2)
             sigma = 2.0 * px_sigma / extent * lever / np.sqrt(max(n / 4.0, 1.0))
-            filt = self.filter.update(raw, t, depth, sigma)
+            filt = self.filter.update(raw, t, depth, sigma, weight=self._smear_weight(gray, sol, raw))
             res.raw_world_from_camera = raw
             res.world_from_camera = filt if self.filter_enabled else raw
             res.markers = sol.markers

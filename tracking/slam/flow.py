@@ -15,10 +15,6 @@ Where the followed points come from:
   triangulates nothing). Seeds off the plane disagree with the others as soon
   as the camera moves sideways and are dropped by the robust fit.
 
-`edge_sharpness` measures how smeared edges are along the motion the flow
-measured: the tracker uses it to tell motion-blurred markers (whose corners
-are off by pixels) from sharp ones.
-
 Pixels: `xy` are distorted image pixels (what the flow measures); the pose fit
 works on undistorted pixels. World points in metres, poses `world_from_camera`.
 """
@@ -141,23 +137,3 @@ def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarr
     moved = nxt[keep] - tracks.xy[keep]
     return pose, Tracks(gray, np.ascontiguousarray(nxt[keep], np.float32), tracks.X[keep], moved)
 
-
-def edge_sharpness(gray: np.ndarray, pixels: np.ndarray, direction: np.ndarray) -> float:
-    """How sharp the edges are across `direction` (2,) in the box around `pixels` (N,2) of a grey
-    image: the 99th percentile of the intensity gradient along `direction`, per pixel, over the
-    box's intensity range (2nd to 98th percentile). An edge smeared over L pixels by motion blur
-    scores about 1/L; a sharp one 0.3 to 0.5 (a soft lens about 0.25). NaN when the box is too small
-    or flat."""
-    h, w = gray.shape[:2]
-    lo = np.maximum(np.floor(pixels.min(axis=0)).astype(int) - 4, 0)
-    hi = np.minimum(np.ceil(pixels.max(axis=0)).astype(int) + 5, [w, h])
-    if (hi - lo).min() < 8 or not np.linalg.norm(direction) > 0:
-        return float("nan")
-    roi = gray[lo[1]:hi[1], lo[0]:hi[0]].astype(np.float32)
-    d = np.asarray(direction, float) / np.linalg.norm(direction)
-    gx = cv2.Sobel(roi, cv2.CV_32F, 1, 0, ksize=3) / 8.0
-    gy = cv2.Sobel(roi, cv2.CV_32F, 0, 1, ksize=3) / 8.0
-    lo_i, hi_i = np.percentile(roi, [2, 98])
-    if hi_i - lo_i < 10:
-        return float("nan")
-    return float(np.percentile(np.abs(gx * d[0] + gy * d[1]), 99) / (hi_i - lo_i))
