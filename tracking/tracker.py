@@ -103,14 +103,15 @@ class Tracker:
     optical flow instead of detecting and matching ORB features (much cheaper per frame).
     flow: when the anchors and the map both fail on a frame after a tracked one, follow keypoints
     (map points, else points seeded on the anchors' plane) from the last frame by optical flow.
-    blur_px, blur_sharpness, blur_gate_px, blur_hold_s: under fast motion markers are smeared and
-    their corners can be off by pixels. When the anchors may have moved `blur_px` pixels or more
+    smear_px, smear_sharpness, smear_gate_px, smear_hold_s: under fast motion markers are smeared and
+    their corners can be off by pixels. When the anchors may have moved `smear_px` pixels or more
     since the last frame, one frame of flow from the last frame is computed as well; if the flow
     confirms the image moved that far, the markers' edges across the motion are soft
-    (`flow.edge_sharpness` below `blur_sharpness`: smeared over more than about 1/blur_sharpness
-    pixels) and the flow pose puts the marker corners more than `blur_gate_px` from where they were
-    detected, the flow pose is used, for at most `blur_hold_s` seconds since the anchors were last
-    accepted (after that they win again, so flow drift is always bounded by the markers).
+    (`anchors.edges.edge_sharpness` below `smear_sharpness`: smeared over more than about
+    1/smear_sharpness pixels) and the flow pose puts the marker corners more than `smear_gate_px`
+    from where they were detected, the flow pose is used, for at most `smear_hold_s` seconds since
+    the anchors were last accepted (after that they win again, so flow drift is always bounded by
+    the markers).
     flow_hold_s: the longest that flow alone (neither anchors nor map confirming) carries the pose;
     after that the frame is lost until the anchors or the map take it up again.
     anchor_first: while the anchors are in view, their tracker's pose (raw for 12+ corners, filtered
@@ -125,8 +126,8 @@ class Tracker:
                  keyframe_parallax: float = 0.08, corner_weight: float = 4.0, corner_share: float = 1 / 3,
                  filter: bool = True, max_pending: int = 2, max_lag: int = 3,
                  klt: bool = True, flow: bool = True, anchor_first: bool = True, keypoint_every: int = 10,
-                 blur_px: float = 10.0, blur_sharpness: float = 0.15, blur_gate_px: float = 1.0,
-                 blur_hold_s: float = 0.5,
+                 smear_px: float = 10.0, smear_sharpness: float = 0.15, smear_gate_px: float = 1.0,
+                 smear_hold_s: float = 0.5,
                  flow_hold_s: float = 2.0):
         from tracking.anchors import AnchorTracker  # the anchors package is built alongside
 
@@ -146,8 +147,8 @@ class Tracker:
         self.max_lag = max(1, int(max_lag))
         self.klt = klt
         self.flow = flow
-        self.blur_px, self.blur_sharpness = blur_px, blur_sharpness
-        self.blur_gate_px, self.blur_hold_s = blur_gate_px, blur_hold_s
+        self.smear_px, self.smear_sharpness = smear_px, smear_sharpness
+        self.smear_gate_px, self.smear_hold_s = smear_gate_px, smear_hold_s
         self.flow_hold_s = flow_hold_s
         self.anchor_first = bool(anchor_first)
         self.keypoint_every = max(1, int(keypoint_every))
@@ -483,29 +484,29 @@ class Tracker:
 
     def _smeared(self, ar, got, gray, t) -> bool:
         """Whether the anchors' measurement this frame is to be distrusted in favour of the flow pose
-        `got` (see blur_px / blur_sharpness / blur_gate_px / blur_hold_s): recently anchored, the
+        `got` (see smear_px / smear_sharpness / smear_gate_px / smear_hold_s): recently anchored, the
         image moved fast (the flow measures it without any pose), the markers' edges are smeared
         along that motion, and the flow pose disagrees with the detected corners."""
-        if got is None or self._anchor_t is None or t - self._anchor_t > self.blur_hold_s:
+        if got is None or self._anchor_t is None or t - self._anchor_t > self.smear_hold_s:
             return False
         motion = got[1].image_motion()
-        if motion is None or np.linalg.norm(motion) < self.blur_px:
+        if motion is None or np.linalg.norm(motion) < self.smear_px:
             return False
         seen = np.asarray(ar.image_points, float).reshape(-1, 2)
-        if not edge_sharpness(gray, seen, motion) < self.blur_sharpness:
+        if not edge_sharpness(gray, seen, motion) < self.smear_sharpness:
             return False   # sharp (or unmeasurable) markers are measured where they are
         corners = np.asarray(ar.object_points, float).reshape(-1, 3)
         gap = float(np.median(np.linalg.norm(self.camera.project_world(corners, got[0]) - seen, axis=1)))
-        return gap > self.blur_gate_px
+        return gap > self.smear_gate_px
 
     def _moving_fast(self, ar, t) -> bool:
-        """Whether the anchors may have moved more than blur_px in the image since the last frame, by the
+        """Whether the anchors may have moved more than smear_px in the image since the last frame, by the
         motion model or by their own measurement (the model lags when the camera turns around)."""
         if not self.flow or self.motion.last is None:
             return False
         corners = np.asarray(ar.object_points, float).reshape(-1, 3)
         last = self.camera.project_world(corners, self.motion.last)
-        return any(np.linalg.norm(self.camera.project_world(corners, p) - last, axis=1).max() >= self.blur_px
+        return any(np.linalg.norm(self.camera.project_world(corners, p) - last, axis=1).max() >= self.smear_px
                    for p in (self.motion.predict(t), self._anchor_output(ar)))
 
     def _flow_result(self, got, t, t0, markers: int) -> TrackResult:
