@@ -12,6 +12,7 @@ import trimesh
 
 from arapp.printing import SliceSettings, load_profile, parse_gcode, read_stats, slice_mesh
 from arapp.printing.prusa import find_prusa, prusa_config, slice_with_prusa
+from test_slicer import W, reference_section, stepped_block
 
 
 
@@ -19,27 +20,6 @@ from arapp.printing.prusa import find_prusa, prusa_config, slice_with_prusa
 def _prusa_installed():
     # The peer is part of the test set-up (the Makefile installs it): its absence is a failure, not a skip.
     assert find_prusa() is not None, "PrusaSlicer's CLI (Debian package prusa-slicer) is missing; run `make setup`"
-
-W = 0.45
-
-
-def reference_section(mesh, z):
-    sec = mesh.section(plane_origin=(0, 0, z), plane_normal=(0, 0, 1))
-    if sec is None:
-        return shapely.Polygon()
-    planar, _ = sec.to_2D(to_2D=np.eye(4))
-    return shapely.union_all([shapely.Polygon(p.exterior, p.interiors) for p in planar.polygons_full])
-
-
-def stepped_block():
-    base = trimesh.creation.box(extents=(24, 16, 4))
-    base.apply_translation((0, 0, 2))
-    step = trimesh.creation.box(extents=(10, 16, 6))
-    step.apply_translation((-7, 0, 7))
-    hole = trimesh.creation.cylinder(radius=3, height=30, sections=48)
-    hole.apply_translation((6, 0, 0))
-    return trimesh.boolean.difference([trimesh.boolean.union([base, step], engine="manifold"), hole], engine="manifold")
-
 
 def ring():
     return trimesh.creation.torus(major_radius=12, minor_radius=4, major_sections=64, minor_sections=32)

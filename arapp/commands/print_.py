@@ -64,15 +64,10 @@ def _read_key_interactively() -> str:
 
 def _slice_model(args, profile) -> Path:
     """Slice a model with the same options as `arapp slice`; returns the G-code path."""
-    from arapp.commands.slice import load_for_printing
-    from arapp.printing import SliceSettings, slice_mesh
+    from arapp.commands.slice import load_for_printing, settings_from_args
+    from arapp.printing import slice_mesh
 
-    settings = SliceSettings(
-        material=args.material, layer_height=args.layer_height,
-        first_layer_height=args.first_layer_height if args.first_layer_height is not None else args.layer_height,
-        infill=args.infill, infill_pattern=args.pattern, perimeters=args.perimeters,
-        scale_to_fit=args.scale_to_fit, z_hop=args.z_hop, retract_length=args.retract,
-    )
+    settings = settings_from_args(args)
     mesh = load_for_printing(args.input, args.size, args.thickness, profile)
     if args.slicer == "prusa":
         from arapp.printing.prusa import slice_with_prusa

@@ -65,18 +65,25 @@ def _progress_printer():
     return show
 
 
-def run(args) -> int:
-    from arapp.printing import SliceSettings, load_profile
-    from arapp.printing.export import write_mesh
-    from arapp.printing.gcode import format_duration
+def settings_from_args(args):
+    """The SliceSettings that the slicing flags of `arapp slice` and `arapp print` ask for."""
+    from arapp.printing import SliceSettings
 
-    profile = load_profile(args.printer)
-    settings = SliceSettings(
+    return SliceSettings(
         material=args.material, layer_height=args.layer_height,
         first_layer_height=args.first_layer_height if args.first_layer_height is not None else args.layer_height,
         infill=args.infill, infill_pattern=args.pattern, perimeters=args.perimeters,
         scale_to_fit=args.scale_to_fit, z_hop=args.z_hop, retract_length=args.retract,
     )
+
+
+def run(args) -> int:
+    from arapp.printing import load_profile
+    from arapp.printing.export import write_mesh
+    from arapp.printing.gcode import format_duration
+
+    profile = load_profile(args.printer)
+    settings = settings_from_args(args)
     mesh = load_for_printing(args.model, args.size, args.thickness, profile)
     if args.slicer == "prusa":
         from arapp.printing.prusa import slice_with_prusa
