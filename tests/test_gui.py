@@ -491,6 +491,7 @@ def test_dragging_on_the_view_places_the_model(qtbot, window, recording):
         return QPoint(round(rect.x() + (u + 0.5) / info.camera.width * rect.width()),
                       round(rect.y() + (v + 0.5) / info.camera.height * rect.height()))
 
+    latencies = len(window.latencies_ms)
     # drag from the model's foot 25 mm along the marker's x: the offset follows the pointer
     qtbot.mousePress(view, Qt.MouseButton.LeftButton, pos=widget_pos(0, 0))
     qtbot.mouseMove(view, widget_pos(12, 0))
@@ -511,6 +512,8 @@ def test_dragging_on_the_view_places_the_model(qtbot, window, recording):
     drawn = overlay_mask(window.last_shown)
     expected, _ = projected_mask(window, window.last_shown, placed)
     assert iou(drawn, expected) > 0.85
+    # the paused frame drawn again is not a capture-to-paint latency
+    assert len(window.latencies_ms) == latencies
     # Shift+drag a quarter turn around the model
     x0 = window.placement["offset"][0]
     rz0 = window.placement["rotation_deg"][2]

@@ -85,6 +85,7 @@ class MainWindow(QMainWindow):
         self._awaiting_paint = None
         self.frames_painted = 0
         self._engine_frames = 0
+        self._painted_frame = self._painted_capture = None
         self.latencies_ms: list[float] = []
         self._paint_times: deque[float] = deque(maxlen=120)
         self.fps = 0.0
@@ -274,6 +275,7 @@ class MainWindow(QMainWindow):
         r = self.view.devicePixelRatioF()
         engine.set_display_size(int(self.view.width() * r), int(self.view.height() * r))
         self._engine_frames = 0
+        self._painted_frame = self._painted_capture = None
         self.latency_ms = 0.0
         self.status_source.setText(f"opening {name}...")
         self.view.message = f"Opening {name}..."
@@ -363,10 +365,12 @@ class MainWindow(QMainWindow):
             return
         self.frames_painted += 1
         self._engine_frames += 1
-        if self._engine_frames == 1:
-            counts = False  # the first frame of a source waits for GL start-up: not a latency
-        else:
-            counts = True
+        redraw = (self._painted_frame is not None and shown.result.index == self._painted_frame
+                  and shown.captured_at == self._painted_capture)
+        self._painted_frame, self._painted_capture = shown.result.index, shown.captured_at
+        # the first frame of a source waits for GL start-up, and a paused frame drawn again with new
+        # settings was captured long ago: neither is a latency
+        counts = self._engine_frames > 1 and not redraw
         latency = (when - shown.captured_at) * 1e3
         if counts:
             self.latencies_ms.append(latency)
