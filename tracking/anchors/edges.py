@@ -70,9 +70,12 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
     for _ in range(2):  # the second pass re-centres the window on the first estimate
         centre = base + nrm[:, :, None, :] * shift[..., None]
         pts = centre[:, :, :, None, :] + nrm[:, :, None, None, :] * offs[:, None, None, :, None]  # (M,4,ns,17,2)
-        flat = pts.reshape(-1, 2).astype(np.float32)
-        vals = cv2.remap(img, flat[:, 0:1] - np.float32(x0), flat[:, 1:2] - np.float32(y0), cv2.INTER_LINEAR,
+        # a 2-D map, one row per side: cv2.remap refuses maps of 32767 rows or more, which a single
+        # column of samples reached at 31 markers (16 x 17 samples per side, 4 sides per marker)
+        grid = pts.reshape(-1, pts.shape[2] * pts.shape[3], 2).astype(np.float32)
+        vals = cv2.remap(img, grid[..., 0] - np.float32(x0), grid[..., 1] - np.float32(y0), cv2.INTER_LINEAR,
                          borderMode=cv2.BORDER_REPLICATE).reshape(pts.shape[:-1]).astype(np.float64)
+        flat = grid.reshape(-1, 2)
         inside = (flat[:, 0] >= 0) & (flat[:, 0] <= w - 1) & (flat[:, 1] >= 0) & (flat[:, 1] <= h - 1)
         inside = inside.reshape(pts.shape[:-1]).all(axis=-1)  # (M,4,ns)
         # Edge position = centroid of |dI/ds|; by parts it is a ratio of areas under the profile, which
