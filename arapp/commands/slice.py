@@ -34,11 +34,17 @@ def add_arguments(parser):
 
 
 def load_for_printing(path: str, size_mm: float | None, thickness_mm: float, profile):
-    """The model at `path` as a watertight solid on the bed (mm): JSON models through arapp.geometry."""
-    from arapp.printing.export import MESH_SUFFIXES, load_mesh, placed_solid, scale_to_size
+    """The model at `path` as a watertight solid on the bed (mm): meshes through arapp.exchange (the one
+    loader and units rule), JSON models through arapp.geometry. `size_mm` and `thickness_mm` are checked."""
+    from arapp.exchange import is_mesh_path, load_mesh
+    from arapp.geometry.model import check_size_mm
+    from arapp.printing.export import placed_solid, scale_to_size
 
+    if size_mm is not None:
+        size_mm = check_size_mm(size_mm, "--size")
+    check_thickness_mm(thickness_mm, size_mm)
     p = Path(path)
-    if p.suffix.lower() in MESH_SUFFIXES:
+    if is_mesh_path(p):
         mesh = load_mesh(p)
         if size_mm is not None:
             mesh = scale_to_size(mesh, size_mm)
@@ -48,6 +54,15 @@ def load_for_printing(path: str, size_mm: float | None, thickness_mm: float, pro
     model = load_model(p)
     placement = {"size_mm": size_mm} if size_mm is not None else None
     return placed_solid(model, placement, thickness_mm=thickness_mm, profile=profile)
+
+
+def check_thickness_mm(thickness_mm: float, size_mm: float | None = None) -> float:
+    """The wall thickness for open surfaces (mm) when usable: positive, at most 50 mm and the part's size."""
+    limit = min(50.0, size_mm) if size_mm is not None else 50.0
+    if not (isinstance(thickness_mm, (int, float)) and 0 < thickness_mm <= limit):
+        raise ValueError(f"--thickness must be above 0 and at most {limit:g} mm (the part's size or 50 mm), "
+                         f"got {thickness_mm!r}")
+    return float(thickness_mm)
 
 
 def _progress_printer():
@@ -65,25 +80,31 @@ def _progress_printer():
     return show
 
 
-def settings_from_args(args):
-    """The SliceSettings that the slicing flags of `arapp slice` and `arapp print` ask for."""
-    from arapp.printing import SliceSettings
+def settings_from_args(args, profile=None):
+    """The SliceSettings that the slicing flags of `arapp slice` and `arapp print` ask for, checked against
+    `profile` (default: the one `args.printer` names): SettingsError names the flag and the allowed range."""
+    from arapp.printing import SliceSettings, load_profile
 
+    if profile is None:
+        profile = load_profile(getattr(args, "printer", None))
     return SliceSettings(
         material=args.material, layer_height=args.layer_height,
         first_layer_height=args.first_layer_height if args.first_layer_height is not None else args.layer_height,
         infill=args.infill, infill_pattern=args.pattern, perimeters=args.perimeters,
         scale_to_fit=args.scale_to_fit, z_hop=args.z_hop, retract_length=args.retract,
-    )
+    ).check_for(profile)
 
 
 def run(args) -> int:
+    from arapp.exchange import write_atomic, write_mesh
     from arapp.printing import load_profile
-    from arapp.printing.export import write_mesh
     from arapp.printing.gcode import format_duration
 
     profile = load_profile(args.printer)
-    settings = settings_from_args(args)
+    settings = settings_from_args(args, profile)
+    out = Path(args.output)
+    if out.suffix.lower() in (".stl", ".3mf", ".obj", ".json") or out.is_dir():
+        raise ValueError(f"-o {out}: give a G-code file name (.gcode), not a model or folder")
     mesh = load_for_printing(args.model, args.size, args.thickness, profile)
     if args.slicer == "prusa":
         from arapp.printing.prusa import slice_with_prusa
@@ -93,9 +114,7 @@ def run(args) -> int:
         from arapp.printing import slice_mesh
 
         result = slice_mesh(mesh, settings, profile, progress=_progress_printer())
-    out = Path(args.output)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(result.gcode)
+    write_atomic(out, result.gcode.encode("utf-8"))  # no half-written G-code under the final name
     if args.stl:
         write_mesh(result.mesh, args.stl)
     ext = result.mesh.extents

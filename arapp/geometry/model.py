@@ -15,6 +15,9 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from arapp.exchange.jsonfile import read_json
+from arapp.exchange.meshes import EXPORT_SUFFIXES, MESH_SUFFIXES, MeshFileError, load_mesh, write_mesh
+
 from . import construct
 from .curve import NurbsCurve
 from .errors import GeometryError, ModelError, fmt
@@ -24,8 +27,7 @@ from .tessellate import default_tolerance
 
 FORMAT_VERSION = 1
 UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
-MESH_SUFFIXES = (".stl", ".obj", ".ply", ".3mf", ".glb", ".gltf", ".off")
-EXPORT_SUFFIXES = (".stl", ".obj", ".ply", ".3mf", ".glb")
+MAX_SIZE_MM = 10_000.0  # 10 m: larger than any printer; past it the float maths of placement breaks down
 DEFAULT_COLOR = (0.8, 0.55, 0.2, 1.0)
 DEFAULT_THICKNESS_MM = 2.0
 
@@ -67,9 +69,7 @@ class Placement:
         if unknown:
             raise ModelError("placement", f"unknown key(s) {', '.join(sorted(unknown))}; "
                              "use size_mm, offset (mm) and rotation_deg (x, y, z degrees)")
-        size = float(value.get("size_mm", base.size_mm))
-        if not (math.isfinite(size) and size > 0):
-            raise ModelError("placement.size_mm", f"must be a positive number of millimetres, got {size}")
+        size = check_size_mm(value.get("size_mm", base.size_mm), "placement.size_mm")
         place = cls(size, value.get("offset", base.offset), value.get("rotation_deg", base.rotation_deg))
         if len(place.offset) != 3 or len(place.rotation_deg) != 3:
             raise ModelError("placement", "offset and rotation_deg need three components (x, y, z)")
@@ -191,10 +191,15 @@ class Model:
         (default placement.size_mm), standing on z = 0 centred over the origin."""
         place = Placement(size_mm if size_mm is not None else self.placement.size_mm, (0.0, 0.0, 0.0),
                           self.placement.rotation_deg)
-        if not place.size_mm > 0 or not math.isfinite(place.size_mm):
-            raise ModelError("size", f"must be a positive number of millimetres, got {size_mm!r}")
+        check_size_mm(place.size_mm, "size")
         if not thickness_mm > 0 or not math.isfinite(thickness_mm):
             raise ModelError("thickness", f"must be a positive number of millimetres, got {thickness_mm!r}")
+        if thickness_mm > place.size_mm:
+            raise ModelError("thickness", f"{fmt(thickness_mm)} mm is more than the part's size "
+                             f"({fmt(place.size_mm)} mm); give a thinner wall")
+        if tolerance_mm is not None and not (math.isfinite(tolerance_mm) and 0 < tolerance_mm <= place.size_mm / 10):
+            raise ModelError("tolerance", f"must be a positive number of millimetres up to a tenth of the size "
+                             f"({fmt(place.size_mm / 10)} mm), got {tolerance_mm!r}")
         placed = Model(self.name, self.units, self.color, place, self.surfaces, self.path, self.source_mesh,
                        self._meshes)  # same surfaces: share the tessellation cache
         mm = placed.transformed(placed.placement_matrix("mm"))
@@ -212,8 +217,10 @@ class Model:
             raise ModelError("output", f"unsupported format {path.suffix or '(none)'!r} for {path}; "
                              f"use one of {', '.join(EXPORT_SUFFIXES)}")
         mesh = self.printable(size_mm, thickness_mm, tolerance_mm)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        mesh.export(path)
+        if not (mesh.is_watertight and mesh.volume > 0):
+            raise ModelError("output", f"the solid for {path} has no volume at this size; "
+                             "choose another --size or --thickness")
+        write_mesh(mesh, path)  # temporary file renamed into place: no half-written file on failure
         return mesh
 
 
@@ -225,12 +232,7 @@ def load_model(path) -> Model:
         raise ModelError(str(path), "no such file")
     if path.suffix.lower() in MESH_SUFFIXES:
         return _load_mesh(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError as exc:
-        raise ModelError(str(path), f"not a text file ({exc.reason})") from None
-    except json.JSONDecodeError as exc:
-        raise ModelError(str(path), f"invalid JSON at line {exc.lineno} column {exc.colno}: {exc.msg}") from None
+    data = read_json(path, "model", lambda message: ModelError("", message), expect=None)
     try:
         model = model_from_dict(data, default_name=path.stem)
     except GeometryError as exc:
@@ -240,14 +242,23 @@ def load_model(path) -> Model:
     return model
 
 
-def _load_mesh(path: Path) -> Model:
+def check_size_mm(size, where: str = "size") -> float:
+    """`size` (mm) as a float when it is a usable part size, 0 < size <= MAX_SIZE_MM; else ModelError at `where`."""
     try:
-        mesh = trimesh.load(path, force="mesh")
-    except Exception as exc:  # trimesh raises many types for malformed files
-        raise ModelError(str(path), f"cannot read mesh: {exc}") from None
-    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-        raise ModelError(str(path), "the file holds no triangles")
-    # Mesh files carry no units; take them as millimetres and keep their size.
+        value = float(size)
+    except (TypeError, ValueError):
+        raise ModelError(where, f"must be a number of millimetres, got {size!r}") from None
+    if not (math.isfinite(value) and 0 < value <= MAX_SIZE_MM):
+        raise ModelError(where, f"must be a positive number of millimetres up to {fmt(MAX_SIZE_MM)}, got {size!r}")
+    return value
+
+
+def _load_mesh(path: Path) -> Model:
+    """A mesh file as a Model in millimetres (arapp.exchange.meshes: the one loader and units rule)."""
+    try:
+        mesh = load_mesh(path)
+    except MeshFileError as exc:
+        raise ModelError("", str(exc)) from None
     size = float(np.max(mesh.extents)) if np.max(mesh.extents) > 0 else 50.0
     return Model(path.stem, "mm", DEFAULT_COLOR, Placement(size_mm=size), [], path, mesh)
 
@@ -387,7 +398,7 @@ def model_from_dict(data, default_name: str = "model") -> Model:
         p = data["placement"]
         _check_keys(p, {"size_mm", "offset", "rotation_deg"}, "placement")
         placement = Placement(
-            _number(p.get("size_mm", 50.0), "placement.size_mm", positive=True),
+            check_size_mm(_number(p.get("size_mm", 50.0), "placement.size_mm", positive=True), "placement.size_mm"),
             _vector(p.get("offset", [0, 0, 0]), 3, "placement.offset"),
             _vector(p.get("rotation_deg", [0, 0, 0]), 3, "placement.rotation_deg"),
         )
@@ -395,4 +406,10 @@ def model_from_dict(data, default_name: str = "model") -> Model:
     if not isinstance(surfaces, list) or not surfaces:
         raise ModelError("surfaces", "must be a non-empty list of surfaces")
     built = [_surface(s, f"surfaces[{i}]") for i, s in enumerate(surfaces)]
+    for i, s in enumerate(built):
+        lo, hi = s.bounds()
+        if not float(np.max(hi - lo)) > 0:
+            # a zero-size net has no chord tolerance, no normals and nothing to print
+            raise ModelError(f"surfaces[{i}].control_points", "all control points coincide, so the surface is a "
+                             "single point; move them apart")
     return Model(name, units, color, placement, built)

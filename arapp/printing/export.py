@@ -13,25 +13,20 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-MESH_SUFFIXES = (".stl", ".obj", ".3mf", ".ply", ".off", ".glb", ".gltf")
-_UNIT_MM = {"mm": 1.0, "millimeter": 1.0, "millimeters": 1.0, "millimetre": 1.0, "cm": 10.0, "centimeter": 10.0,
-            "centimeters": 10.0, "m": 1000.0, "meter": 1000.0, "meters": 1000.0, "metre": 1000.0,
-            "in": 25.4, "inch": 25.4, "inches": 25.4, "um": 1e-3, "micron": 1e-3, "ft": 304.8, "foot": 304.8}
+# The mesh formats, their loader (one units rule) and writers live in arapp.exchange; the names stay importable here.
+from arapp.exchange.meshes import (  # noqa: F401
+    FORMATS,
+    MESH_SUFFIXES,
+    MeshFileError,
+    load_mesh,
+    units_to_mm,
+    write_atomic,
+    write_mesh,
+)
 
 
 class ModelDoesNotFitError(ValueError):
     """The model (with its skirt) is larger than the printer's build volume."""
-
-
-class MeshFileError(ValueError):
-    """A mesh file that cannot be read or holds no triangles."""
-
-
-def units_to_mm(units: str | None) -> float:
-    """Millimetres per model unit; None or unknown units are taken as millimetres."""
-    if not units:
-        return 1.0
-    return _UNIT_MM.get(str(units).strip().lower(), 1.0)
 
 
 def clean_mesh(mesh: trimesh.Trimesh, merge_digits: int = 4) -> trimesh.Trimesh:
@@ -206,48 +201,11 @@ def scale_to_size(mesh: trimesh.Trimesh, size_mm: float) -> trimesh.Trimesh:
     return out
 
 
-def load_mesh(path: str | Path) -> trimesh.Trimesh:
-    """A triangle mesh from STL (ASCII or binary), OBJ, 3MF, ... in millimetres (3MF units honoured).
-
-    Normals in the file are ignored (some exporters write zeros); facets are
-    re-oriented only through `clean_mesh` when the mesh is closed.
-    """
-    p = Path(path)
-    if not p.exists():
-        raise MeshFileError(f"mesh file {p} not found")
-    try:
-        loaded = trimesh.load(p, force="mesh", process=True)
-    except (ValueError, KeyError, IndexError, OSError) as exc:
-        raise MeshFileError(f"cannot read mesh file {p}: {exc}") from None
-    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
-        raise MeshFileError(f"{p} holds no triangles")
-    units = getattr(loaded, "units", None)
-    if units:
-        loaded.apply_scale(units_to_mm(units))
-    return loaded
-
-
 def write_stl(mesh: trimesh.Trimesh, path: str | Path) -> Path:
-    """Write a binary STL (millimetres)."""
-    p = Path(path)
-    p.write_bytes(trimesh.exchange.stl.export_stl(mesh))
-    return p
+    """Write a binary STL (millimetres) to `path` whatever its suffix; atomic."""
+    return write_atomic(path, FORMATS[".stl"].writer(mesh))
 
 
 def write_3mf(mesh: trimesh.Trimesh, path: str | Path) -> Path:
-    """Write a 3MF file (units: millimetre)."""
-    p = Path(path)
-    m = mesh.copy()
-    m.units = "millimeters"
-    p.write_bytes(trimesh.exchange.threemf.export_3MF(m))
-    return p
-
-
-def write_mesh(mesh: trimesh.Trimesh, path: str | Path) -> Path:
-    """Write STL or 3MF by the file's suffix."""
-    suffix = Path(path).suffix.lower()
-    if suffix == ".stl":
-        return write_stl(mesh, path)
-    if suffix == ".3mf":
-        return write_3mf(mesh, path)
-    raise ValueError(f"cannot export {path}: use a .stl or .3mf file name")
+    """Write a 3MF file (unit: millimetre) to `path` whatever its suffix; atomic."""
+    return write_atomic(path, FORMATS[".3mf"].writer(mesh))

@@ -8,12 +8,13 @@ millimetres, to the bed frame (the printer's G-code coordinates).
 from __future__ import annotations
 
 import copy
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from arapp.exchange.jsonfile import read_json
 
 FORMAT = "arapp-printer/1"
 PROFILES_DIR = Path(__file__).with_name("profiles")
@@ -56,6 +57,8 @@ class PrinterProfile:
     bed_anchor: object | None          # tracking.session.AnchorSpec, or None
     bed_from_anchor: np.ndarray | None  # 4x4, anchor frame (mm) -> bed frame (mm)
     source: str = "<generic>"
+    max_hotend_temperature: float = 300.0  # °C; slicing settings and jobs above it are refused
+    max_bed_temperature: float = 120.0     # °C
     raw: dict = field(default_factory=dict, repr=False)
 
     @property
@@ -77,7 +80,16 @@ class PrinterProfile:
 _TOP = {
     "format": str, "name": str, "bed": dict, "nozzle_diameter": float, "filament_diameter": float,
     "flavor": str, "start_gcode": str, "end_gcode": str, "link": dict, "bed_anchor": dict,
+    "max_hotend_temperature": float, "max_bed_temperature": float,
 }
+# Ranges of the numbers (what real FFF printers have); a value outside is a typo (mm for cm, a missing dot).
+_RANGES = {
+    "nozzle_diameter": (0.1, 2.0, "mm"), "filament_diameter": (1.0, 3.5, "mm"),
+    "max_hotend_temperature": (150.0, 500.0, "°C"), "max_bed_temperature": (0.0, 200.0, "°C"),
+    "bed.width": (10.0, 2000.0, "mm"), "bed.depth": (10.0, 2000.0, "mm"), "bed.height": (1.0, 2000.0, "mm"),
+}
+DEFAULT_MAX_HOTEND = 300.0
+DEFAULT_MAX_BED = 120.0
 _BED = {"width": float, "depth": float, "height": float}
 _LINK = {"port": str, "baud": int}
 _FLAVORS = ("marlin",)
@@ -98,17 +110,14 @@ def _check(value, typ, where: str, src: str):
 
 
 def _read_json(path: Path) -> dict:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise ProfileError(f"cannot read printer profile {path}: {exc.strerror or exc}") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ProfileError(f"{path}: not valid JSON (line {exc.lineno}, column {exc.colno}): {exc.msg}") from None
-    if not isinstance(data, dict):
-        raise ProfileError(f"{path}: a printer profile must be a JSON object")
-    return data
+    return read_json(path, "printer profile", ProfileError)
+
+
+def _in_range(value: float, key: str, source: str) -> float:
+    lo, hi, unit = _RANGES[key]
+    if not lo <= value <= hi:
+        raise ProfileError(f"{source}: {key}: must be {lo:g} to {hi:g} {unit}, got {value:g}")
+    return value
 
 
 def parse_profile(data: dict, source: str = "<profile>", defaults: dict | None = None) -> PrinterProfile:
@@ -129,6 +138,8 @@ def parse_profile(data: dict, source: str = "<profile>", defaults: dict | None =
             data_value = _check(data[key], typ, key, source)
             if typ is float and data_value <= 0:
                 raise ProfileError(f"{source}: {key}: must be positive (millimetres), got {data_value}")
+            if key in _RANGES:
+                _in_range(data_value, key, source)
     if data["format"] != FORMAT:
         raise ProfileError(f"{source}: format: must be {FORMAT!r}, got {data['format']!r}")
     merged = copy.deepcopy(defaults or {})
@@ -145,6 +156,7 @@ def parse_profile(data: dict, source: str = "<profile>", defaults: dict | None =
         dims[key] = _check(bed[key], float, f"bed.{key}", source)
         if dims[key] <= 0:
             raise ProfileError(f"{source}: bed.{key}: must be positive (millimetres), got {dims[key]}")
+        _in_range(dims[key], f"bed.{key}", source)
 
     link_block = dict((defaults or {}).get("link", {}))
     link_block.update(data.get("link", {}))
@@ -179,6 +191,8 @@ def parse_profile(data: dict, source: str = "<profile>", defaults: dict | None =
         bed_from_anchor=bed_from_anchor,
         source=source,
         raw=merged,
+        max_hotend_temperature=float(merged.get("max_hotend_temperature", DEFAULT_MAX_HOTEND)),
+        max_bed_temperature=float(merged.get("max_bed_temperature", DEFAULT_MAX_BED)),
     )
 
 

@@ -1,0 +1,20 @@
+"""File exchange: mesh formats (meshes.py: one suffix table, one loader, one units rule, one writer table),
+JSON documents read with errors naming the file (jsonfile.py), and the table of arapp's document formats
+(files.py: model, session, printer profile, camera calibration, each with its one reader)."""
+
+from .jsonfile import read_json
+from .meshes import (
+    EXPORT_SUFFIXES,
+    FORMATS,
+    MESH_SUFFIXES,
+    MeshFileError,
+    MeshFormat,
+    is_mesh_path,
+    load_mesh,
+    units_to_mm,
+    write_atomic,
+    write_mesh,
+)
+
+__all__ = ["EXPORT_SUFFIXES", "FORMATS", "MESH_SUFFIXES", "MeshFileError", "MeshFormat", "is_mesh_path",
+           "load_mesh", "read_json", "units_to_mm", "write_atomic", "write_mesh"]
