@@ -1,7 +1,8 @@
 """What every printer link (USB serial, OctoPrint) offers, and the progress it reports.
 
-The GUI and `arapp print` drive either link the same way: `connect()`, then
-`print_gcode(lines, progress=callback, cancel=event)` (blocking; run it on a
+The GUI and `arapp print` drive either link the same way: `make_link(target)`
+(factory.py), `connect()`, then
+`print_gcode(lines, progress=callback, cancel=event, gcode_path=path)` (blocking; run it on a
 worker thread in the GUI), `pause()`, `resume()`, `cancel()` from any thread,
 and `close()`. The callback receives `Progress`; the AR preview highlights
 `Progress.layer`.
@@ -89,9 +90,14 @@ class PrintLink(ABC):
         lines: Sequence[str],
         progress: ProgressCallback | None = None,
         cancel: threading.Event | None = None,
+        *,
+        gcode_path: str = "",
     ) -> JobState:
-        """Run the G-code to the end (or until cancelled); return the final job state.
+        """Run the G-code to the end (or until `cancel` is set); return the final job state.
 
+        `gcode_path` is the file the lines came from (kept in the job state for
+        a resume). Setting `cancel` is all a caller needs to stop a print (the
+        link looks at it at least 4 times a second); `cancel()` does the same.
         Raises PrinterHalted, LinkLost (job state saved where configured).
         """
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import re
 import time
@@ -31,6 +32,17 @@ _HEATING = {"M104", "M109", "M140", "M190"}
 
 class JobFileError(ValueError):
     """A job file that cannot be read or does not match its G-code."""
+
+
+# Job status values after which a job cannot continue.
+NOT_RESUMABLE = frozenset({"cancelled", "done"})
+STATUSES = frozenset({"new", "printing", "cancelling", "cancelled", "done", "halted", "reset", "link_lost",
+                      "failed"})
+# Slicers put purge lines just outside the bed (PrusaSlicer's at Y-3): positions up to this far
+# outside it (mm) are accepted.
+BED_MARGIN_MM = 5.0
+DEFAULT_MAX_HOTEND_C = 300.0
+DEFAULT_MAX_BED_C = 120.0
 
 
 @dataclass
@@ -206,10 +218,11 @@ class JobState:
         os.replace(tmp, path)
 
     @classmethod
-    def load(cls, path) -> "JobState":
+    def load(cls, path, profile=None) -> "JobState":
+        """Read and check a job file (see `check_job_fields`); JobFileError names the file and field."""
         try:
             data = json.loads(Path(path).read_text(encoding="utf-8"))
-        except (OSError, json.JSONDecodeError) as exc:
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
             raise JobFileError(f"cannot read print job {path}: {exc}") from exc
         if not isinstance(data, dict) or data.get("format") != JOB_FORMAT:
             raise JobFileError(f"{path} is not an {JOB_FORMAT} job file (key 'format')")
@@ -218,6 +231,7 @@ class JobState:
         unknown = sorted(set(data) - known)
         if unknown:
             raise JobFileError(f"{path}: unknown key(s) {', '.join(unknown)}")
+        check_job_fields(data, path, profile)
         return cls(**data)
 
     def check_program(self, program: Program, path) -> None:
@@ -227,6 +241,78 @@ class JobState:
                 f"the G-code {path} changed since the job was saved (sha256 differs); "
                 "resume with the original file"
             )
+
+
+def _finite(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def check_job_fields(data: dict, path, profile=None) -> None:
+    """Refuse a job file field of the wrong type or out of range (JobFileError, one line naming file
+    and field). Ranges: positions within the profile's bed (mm, `BED_MARGIN_MM` outside allowed),
+    heater targets from 0 to the profile's maxima (degrees C), counts and `next_line` >= 0; the
+    G-code's sha256 is required."""
+    def bad(key, why):
+        return JobFileError(f"{path}: field '{key}' {why} (got {data.get(key)!r}); fix or delete the job file")
+
+    bed = getattr(profile, "bed", None)
+    size = {"x": getattr(bed, "width", None), "y": getattr(bed, "depth", None), "z": getattr(bed, "height", None)}
+    max_temp = {
+        "hotend_target": float(getattr(profile, "max_hotend_temperature", DEFAULT_MAX_HOTEND_C)),
+        "bed_target": float(getattr(profile, "max_bed_temperature", DEFAULT_MAX_BED_C)),
+    }
+    sha = data.get("gcode_sha256")
+    if not isinstance(sha, str) or not re.fullmatch(r"[0-9a-f]{64}", sha):
+        raise bad("gcode_sha256", "must be the G-code's sha256 (64 hex digits)")
+    for key in ("gcode", "status", "message", "port"):
+        if key in data and not isinstance(data[key], str):
+            raise bad(key, "must be a string")
+    if data.get("status", "new") not in STATUSES:
+        raise bad("status", f"must be one of {', '.join(sorted(STATUSES))}")
+    for key, low in (("source_lines", 0), ("next_line", 0), ("commands_done", 0), ("commands_total", 0),
+                     ("layer", -1), ("layer_count", 0), ("baud", 0), ("fan", 0)):
+        if key in data and (not isinstance(data[key], int) or isinstance(data[key], bool) or data[key] < low):
+            raise bad(key, f"must be a whole number >= {low}")
+    if data.get("fan", 0) > 255:
+        raise bad("fan", "must be 0..255")
+    if data.get("next_line", 0) > data.get("source_lines", 0):
+        raise bad("next_line", "must not be past the G-code's last line (source_lines)")
+    if data.get("commands_done", 0) > data.get("commands_total", 0):
+        raise bad("commands_done", "must not exceed commands_total")
+    for key in ("x", "y", "z", "e", "f", "hotend", "bed", "hotend_target", "bed_target", "updated"):
+        value = data.get(key)
+        if value is None and key in ("x", "y", "z", "f", "hotend", "bed"):
+            continue
+        if key in data and not _finite(value):
+            raise bad(key, "must be a finite number")
+    for key in ("x", "y", "z"):
+        value = data.get(key)
+        if value is None:
+            continue
+        low = 0.0 if key == "z" else -BED_MARGIN_MM
+        high = size[key] + (0.0 if key == "z" else BED_MARGIN_MM) if size[key] is not None else None
+        if value < low or (high is not None and value > high):
+            raise bad(key, f"must lie on the bed ({low:g} to {high if high is not None else 'inf'} mm)")
+    if data.get("f") is not None and data["f"] <= 0:
+        raise bad("f", "must be a positive feed rate (mm/min)")
+    for key, high in max_temp.items():
+        if key in data and not 0.0 <= data[key] <= high:
+            raise bad(key, f"must be 0 to {high:g} C (the printer profile's maximum)")
+    for key in ("absolute_xyz", "absolute_e"):
+        if key in data and not isinstance(data[key], bool):
+            raise bad(key, "must be true or false")
+
+
+def check_resumable(state: JobState, path, *, after_halt: bool = False) -> None:
+    """Refuse to resume a cancelled or finished job; a halted one only with `after_halt`
+    (the user has read why the printer halted)."""
+    if state.status in NOT_RESUMABLE:
+        raise JobFileError(f"{path}: this job is {state.status} and cannot be resumed; start the print again")
+    if state.status == "halted" and not after_halt:
+        raise JobFileError(
+            f"{path}: the printer halted during this job ({state.message or 'no message'}); "
+            "fix the cause, then resume with --after-halt"
+        )
 
 
 def new_state(program: Program, gcode_path: str = "") -> JobState:

@@ -1,23 +1,15 @@
 """USB serial link to Marlin firmware: stream G-code so that no line is lost or run twice.
 
-How exactly-once works. Every line goes out as `N<n> <cmd>*<xor>`; the firmware
-only accepts line `last + 1` and answers anything else with
-`Resend: <last + 1>`, so a line number can never run twice, and a line that is
-missing is asked for. The host therefore (1) sends every line number, in
-order, keeping the sent lines (`history`) until they are acknowledged, (2) on
-`Resend: r` sends again from `r` (the printer is the authority on what it has
-run), and (3) when the printer says nothing at all (or says `wait`, idle, while
-a line is unanswered) sends again from the first line it has not seen
-acknowledged: a copy of a line it already ran is refused by its number.
+The protocol's rules live in `stream.LineStream` (a state object without
+I/O); this module is the I/O around it. A reader thread turns the port's
+bytes into classified replies (`protocol.Reply`) on a queue; the thread that
+called `print_gcode` writes what the stream says and hands it each reply, or
+the passing of its deadline (no polling loops).
 
-The send window holds at most `window` unacknowledged lines and `rx_buffer`
-bytes (Marlin's receive buffer is 128 bytes). Each line sent (`_Copy`) gets
-exactly one `ok` from the firmware, preceded by `Resend:` when it was refused;
-responses to copies sent before the latest rewind are stale and ignored.
-
-A reader thread turns the port's bytes into classified replies (`protocol.Reply`)
-on a queue; the thread that called `print_gcode` runs the protocol: it writes,
-and waits on the queue (no polling loops).
+Every way out of a run (done, cancelled, firmware halt or reset, no answer,
+port gone, a failure in the host) goes through `_end`: heaters, fan and
+motors off while the port is still up, the job state saved, one exception
+with one line of text.
 """
 
 from __future__ import annotations
@@ -26,17 +18,10 @@ import logging
 import queue
 import threading
 import time
-from collections import deque
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 from . import protocol as P
 from .base import (
-    CANCELLED,
-    CANCELLING,
-    DONE,
-    HEATING,
-    PAUSED,
     PRINTING,
     LinkError,
     LinkLost,
@@ -47,31 +32,14 @@ from .base import (
     ProgressCallback,
     eta,
 )
-from .job import Command, JobState, Program, cancel_commands, new_state
+from .job import NOT_RESUMABLE, JobState, Program, new_state
+from .stream import Item, LineStream, Step, Stop, StopReason
 
 log = logging.getLogger("arapp.printing.link")
 
-_LINK_LOST = "link_lost"  # reader-thread event kind
 _WAKE = "wake"  # pause/resume/cancel from another thread
-
-
-@dataclass
-class _Item:
-    """A line to send: a program command (`command` set) or a host command."""
-
-    text: str
-    command: Command | None = None
-
-
-@dataclass
-class _Copy:
-    """One transmission of a numbered line."""
-
-    number: int
-    size: int
-    epoch: int
-    sent_at: float
-    rejected: bool = False
+# Sent when a print stops any way but done or cancelled: no move, so a resumed job's Z is still right.
+SAFE_STOP = ("M104 S0", "M140 S0", "M107", "M84")
 
 
 class SerialPrinter(PrintLink):
@@ -79,11 +47,13 @@ class SerialPrinter(PrintLink):
 
     window: unacknowledged lines allowed in flight (1 = wait for each `ok`).
     rx_buffer: unacknowledged bytes allowed in flight.
-    timeout: seconds without any reply, with a line unanswered, before it is sent again.
+    timeout: seconds without an answer, with a line unanswered, before it is sent again.
+    blocking_timeout: the same while a blocking command (G29, M0, M109...) runs on a
+        printer that sends no keep-alives.
     max_timeouts: consecutive unanswered resends before the link counts as lost.
     boot_wait: seconds between connection hellos (a board that resets on open
         needs its bootloader time); connect_timeout: give up after this long.
-    job_path: where the job state is saved (on layer changes, on stop, on failure).
+    job_path: where the job state is saved (at the start, every 5 s, at the end).
     bed_height: mm, caps the nozzle lift of a cancel.
     """
 
@@ -95,6 +65,7 @@ class SerialPrinter(PrintLink):
         window: int = 1,
         rx_buffer: int = 127,
         timeout: float = 10.0,
+        blocking_timeout: float = 600.0,
         max_timeouts: int = 5,
         boot_wait: float = 3.0,
         connect_timeout: float = 15.0,
@@ -105,18 +76,20 @@ class SerialPrinter(PrintLink):
     ):
         if window < 1:
             raise ValueError(f"window must be at least 1 line, got {window}")
+        if not timeout > 0:
+            raise ValueError(f"timeout must be positive seconds, got {timeout}")
         self.port = port
         self.baud = int(baud)
         self.window = int(window)
-        self.rx_buffer = int(rx_buffer)
         self.timeout = float(timeout)
-        self.max_timeouts = int(max_timeouts)
         self.boot_wait = float(boot_wait)
         self.connect_timeout = float(connect_timeout)
         self.temp_interval = float(temp_interval)
         self.job_path = job_path
         self.bed_height = bed_height
-        self._history_len = int(history)
+        self._stream = LineStream(window=int(window), rx_buffer=int(rx_buffer), timeout=float(timeout),
+                                  blocking_timeout=float(blocking_timeout), max_timeouts=int(max_timeouts),
+                                  history_len=int(history))
 
         self._serial = None
         self._reader: threading.Thread | None = None
@@ -126,22 +99,29 @@ class SerialPrinter(PrintLink):
 
         self._pause_req = threading.Event()
         self._cancel_req = threading.Event()
-
-        # line-number bookkeeping (see module doc)
-        self._history: dict[int, tuple[bytes, _Item]] = {}
-        self._top = -1  # highest number sent so far
-        self._next = 0  # next number to send
-        self._confirmed = -1  # highest number known run by the printer
-        self._inflight: deque[_Copy] = deque()
-        self._epoch = 0
+        self._last_save = 0.0
 
         self.firmware = ""
         self.capabilities: dict[str, bool] = {}
         self.temperatures: dict = {}
         self.messages: list[str] = []  # echo: lines, latest last (bounded)
         self.state: JobState | None = None
-        self.resends = 0
-        self.timeouts = 0
+        self.save_error: str | None = None
+
+    @property
+    def resends(self) -> int:
+        """Resend requests the printer made so far."""
+        return self._stream.resends
+
+    @property
+    def timeouts(self) -> int:
+        """Times the host sent unanswered lines again."""
+        return self._stream.timeouts
+
+    @property
+    def max_inflight(self) -> int:
+        """The most lines that were in flight at once."""
+        return self._stream.max_inflight
 
     # ------------------------------------------------------------------ port
     def connect(self) -> None:
@@ -163,9 +143,9 @@ class SerialPrinter(PrintLink):
         self._reader.start()
 
         self._handshake()
-        self._run([_Item("M115")], progress=None, cancel=None, connecting=True)
+        self._run([Item("M115")], progress=None, cancel=None, connecting=True)
         if self.capabilities.get("AUTOREPORT_TEMP"):
-            self._run([_Item(f"M155 S{max(1, round(self.temp_interval))}")], None, None, connecting=True)
+            self._run([Item(f"M155 S{max(1, round(self.temp_interval))}")], None, None, connecting=True)
 
     def _handshake(self) -> None:
         """Reset line numbers with `N0 M110 N0` until the firmware answers `ok`.
@@ -188,7 +168,7 @@ class SerialPrinter(PrintLink):
                     break
                 if isinstance(ev, BaseException):
                     raise LinkLost(f"printer port {self.port} closed while connecting: {ev}")
-                if ev.kind in (P.OK, P.START, P.FATAL):
+                if ev is not _WAKE and ev.kind in (P.OK, P.START, P.FATAL):
                     answer = ev
             if answer is not None and answer.kind == P.OK:
                 break
@@ -205,10 +185,7 @@ class SerialPrinter(PrintLink):
             while (ev := self._get_event(quiet)) is not None:
                 if isinstance(ev, BaseException):
                     raise LinkLost(f"printer port {self.port} closed while connecting: {ev}")
-        self._next, self._top, self._confirmed = 1, 0, 0
-        self._history.clear()
-        self._inflight.clear()
-        self._history[0] = (hello, _Item("M110 N0"))
+        self._stream.reset_numbering(hello, time.monotonic())
 
     def close(self) -> None:
         """Close the port (does not stop the printer; cancel first for that)."""
@@ -277,13 +254,15 @@ class SerialPrinter(PrintLink):
         self._events.put(_WAKE)
 
     def cancel(self) -> None:
-        """Stop the job: heaters and fan off, nozzle up, motors off."""
+        """Stop the job: heaters and fan off, nozzle up, motors off. Returns at once; the
+        printing thread sends the cancel sequence (a `cancel` Event given to print_gcode
+        does the same)."""
         self._cancel_req.set()
         self._events.put(_WAKE)
 
     def send_commands(self, commands: Sequence[str]) -> None:
         """Run host commands (e.g. from a console) and wait until all are acknowledged."""
-        self._run([_Item(P.clean_command(c)) for c in commands if P.clean_command(c)], None, None)
+        self._run([Item(P.clean_command(c)) for c in commands if P.clean_command(c)], None, None)
 
     # ---------------------------------------------------------------- job
     def print_gcode(
@@ -292,315 +271,225 @@ class SerialPrinter(PrintLink):
         progress: ProgressCallback | None = None,
         cancel: threading.Event | None = None,
         *,
+        gcode_path: str = "",
         program: Program | None = None,
         state: JobState | None = None,
         preamble: Sequence[str] = (),
-        gcode_path: str = "",
     ) -> JobState:
         """Stream G-code; block until done or cancelled. Returns the final job state.
 
         To resume, pass the saved `state` (its `next_line` is where the job
         continues) and a `preamble` (job.resume_commands) that runs first.
+        Refuses to start (LinkError, nothing sent) when the job file cannot be
+        written or the state is not resumable.
         """
         if self._serial is None:
             raise LinkError("the printer is not connected: call connect() first")
         program = program or Program.from_lines(lines)
         if state is None:
             state = new_state(program, gcode_path)
+        elif state.status in NOT_RESUMABLE:
+            raise LinkError(f"this job is {state.status}; it cannot be resumed: start the print again")
         state.port, state.baud = self.port, self.baud
         state.commands_total = len(program.commands)
         state.status = PRINTING
+        state.message = ""
         self.state = state
+        self.save_error = None
+        if self.job_path:
+            try:
+                state.save(self.job_path)
+            except OSError as exc:
+                raise LinkError(
+                    f"cannot write the job file {self.job_path}: {exc.strerror or exc}; "
+                    "nothing was sent: choose a writable place with --job"
+                ) from exc
+            self._last_save = time.monotonic()
         self._pause_req.clear()
         self._cancel_req.clear()
         start = program.position_of(state.next_line)
-        items = [_Item(P.clean_command(c)) for c in preamble if P.clean_command(c)]
-        items += [_Item(c.text, c) for c in program.commands[start:]]
+        items = [Item(P.clean_command(c)) for c in preamble if P.clean_command(c)]
+        items += [Item(c.text, c) for c in program.commands[start:]]
         self._run(items, progress, cancel)
         return state
 
-    # -------------------------------------------------------- the protocol
+    # -------------------------------------------------------- the I/O loop
     def _run(self, items, progress, cancel, connecting: bool = False) -> None:
-        """Send `items`, handle every reply, return when all ran (or cancelled)."""
-        items = deque(items)
-        state = self.state if not connecting else None
-        t0 = time.monotonic()
-        last_reply = time.monotonic()
-        last_report = 0.0
-        last_save = time.monotonic()
-        last_temp_poll = time.monotonic()
-        done_at_start = state.commands_done if state else 0
-        cancelling = False
-        error_seen_at = None  # a recoverable error without its resend request yet
-        consecutive_timeouts = 0
-        fatal: list[str] = []
-        lost: str | None = None
-        poll_temps = not connecting and not self.capabilities.get("AUTOREPORT_TEMP")
-
-        last_kind = None
-        last_layer = None
-
-        def report(kind: str, force: bool = False):
-            # At most 10 per second, but every change of state and of layer is reported (the AR
-            # preview highlights the layer being printed from these reports).
-            nonlocal last_report, last_kind, last_layer
-            if progress is None or state is None:
-                return
-            now = time.monotonic()
-            if not force and kind == last_kind and state.layer == last_layer and now - last_report < 0.1:
-                return
-            last_report, last_kind, last_layer = now, kind, state.layer
-            elapsed = now - t0
-            progress(self._progress(state, kind, elapsed, done_at_start))
-
-        def current_kind_heating() -> bool:
-            head = self._history.get(self._inflight[0].number) if self._inflight else None
-            return bool(head) and head[1].text.split()[0].upper() in ("M109", "M190")
-
-        def current_kind():
-            if cancelling:
-                return CANCELLING
-            if self._pause_req.is_set():
-                return PAUSED
-            head = self._history.get(self._inflight[0].number) if self._inflight else None
-            if head and head[1].text.split()[0].upper() in ("M109", "M190"):
-                return HEATING
-            return PRINTING
-
-        applied = [self._confirmed]  # highest number applied to the job state
-
-        def executed(number: int):
-            frame_item = self._history.get(number)
-            if frame_item is None or number <= applied[0]:
-                return  # unknown, or already counted (the printer asked again for a line it had)
-            applied[0] = number
-            item = frame_item[1]
-            if state is not None:
-                if item.command is not None:
-                    state.apply(item.command)
-                else:
-                    state.apply(Command(-1, item.text, state.layer))
-            # Drop history far behind the confirmed line.
-            old = number - self._history_len
-            if old in self._history:
-                del self._history[old]
-
-        def confirm_through(number: int):
-            while self._confirmed < number:
-                self._confirmed += 1
-                executed(self._confirmed)
-
-        def rewind(to: int):
-            self._inflight.clear()
-            self._epoch += 1
-            self._next = to
-
-        def finished() -> bool:
-            return not items and self._next > self._top and not self._inflight and self._confirmed >= self._top
-
+        """Send `items` through the stream, feed it every reply; end as `_end` says."""
+        stream = self._stream
+        state = None if connecting else self.state
+        stream.start(items, state, time.monotonic())
+        autoreport = self.capabilities.get("AUTOREPORT_TEMP")
+        stream.poll_interval = 0.0 if connecting or autoreport else self.temp_interval
+        report = _Reporter(self, progress, state)
         try:
-            while True:
-                # -- cancel requests
-                if (self._cancel_req.is_set() or (cancel is not None and cancel.is_set())) and not cancelling and not connecting:
-                    cancelling = True
-                    items.clear()
-                    self._pause_req.clear()
-                    if state is not None:
-                        state.status = CANCELLING
-                        items.extend(_Item(c) for c in cancel_commands(state, bed_height=self.bed_height))
-                    report(CANCELLING, force=True)
-                    if current_kind_heating() and self.capabilities.get("EMERGENCY_PARSER"):
-                        # Marlin's emergency parser acts on M108 as the bytes arrive, ending
-                        # the heat wait at once; it is sent past the window for that reason.
-                        item = _Item("M108")
-                        frame = P.frame(self._top + 1, item.text)
-                        self._history[self._top + 1] = (frame, item)
-                        if self._next == self._top + 1:
-                            self._top += 1
-                            self._write(frame)
-                            self._inflight.append(_Copy(self._next, len(frame), self._epoch, time.monotonic()))
-                            self._next += 1
-                        else:
-                            del self._history[self._top + 1]  # resending: it goes out in order
-                            items.appendleft(item)
-                # -- send while the window has room
-                while (
-                    len(self._inflight) < self.window
-                    and (not self._pause_req.is_set() or self._next <= self._top or cancelling)
-                ):
-                    if self._next <= self._top:
-                        frame = self._history[self._next][0]
-                    elif items:
-                        if (
-                            poll_temps
-                            and time.monotonic() - last_temp_poll > self.temp_interval
-                        ):
-                            item = _Item("M105")
-                            last_temp_poll = time.monotonic()
-                        else:
-                            item = items.popleft()
-                        frame = P.frame(self._next, item.text)
-                        self._history[self._next] = (frame, item)
-                        self._top = self._next
-                    else:
-                        break
-                    inflight_bytes = sum(c.size for c in self._inflight)
-                    if self._inflight and inflight_bytes + len(frame) > self.rx_buffer:
-                        break
-                    self._write(frame)
-                    self._inflight.append(_Copy(self._next, len(frame), self._epoch, time.monotonic()))
-                    self._next += 1
-                if finished():
-                    break
-                # -- wait for a reply (or a timeout)
-                now = time.monotonic()
-                if self._inflight:
-                    deadline = last_reply + self.timeout
-                    if error_seen_at is not None:
-                        deadline = min(deadline, error_seen_at + min(1.0, self.timeout))
-                elif self._pause_req.is_set() and poll_temps:
-                    deadline = last_temp_poll + self.temp_interval
-                else:
-                    deadline = now + self.timeout
-                wake = deadline
-                if cancel is not None and not cancelling:
-                    wake = min(deadline, now + 0.25)  # an external Event cannot wake the queue: look at it
-                ev = self._get_event(wake)
-                if ev is None:
-                    if time.monotonic() < deadline - 1e-3:
-                        pass   # only woken to look at the cancel Event (checked at the loop's top)
-                    elif self._inflight:
-                        consecutive_timeouts += 1
-                        self.timeouts += 1
-                        if consecutive_timeouts > self.max_timeouts:
-                            lost = f"the printer on {self.port} stopped answering (no reply for {self.timeout:g} s, {self.max_timeouts} times)"
-                            break
-                        log.info("no answer for line %d: sending from %d again", self._inflight[0].number, self._confirmed + 1)
-                        error_seen_at = None
-                        last_reply = time.monotonic()
-                        rewind(self._confirmed + 1)
-                    elif self._pause_req.is_set() and poll_temps and not self._inflight:
-                        last_temp_poll = 0.0  # poll temperatures while paused
-                        self._send_poll()
-                        last_temp_poll = time.monotonic()
-                    report(current_kind())
-                    continue
-                if ev == _WAKE:
-                    report(current_kind(), force=True)
-                    continue
-                if isinstance(ev, BaseException):
-                    lost = f"the connection to {self.port} was lost: {ev}"
-                    break
-                last_reply = time.monotonic()
-                consecutive_timeouts = 0
-                kind = ev.kind
-                if ev.temperatures:
-                    for name, (actual, target) in ev.temperatures.items():
-                        if target is None and name in self.temperatures:
-                            target = self.temperatures[name][1]  # heat-up lines carry no target
-                        self.temperatures[name] = (actual, target)
-                    if state is not None:
-                        state.read_temperatures(ev.temperatures)
-                    report(current_kind(), force=True)
-                if kind == P.OK:
-                    error_seen_at = None
-                    if self._inflight:
-                        copy = self._inflight.popleft()
-                        if not copy.rejected and copy.number > self._confirmed:
-                            confirm_through(copy.number)
-                    report(current_kind())
-                elif kind == P.RESEND:
-                    error_seen_at = None
-                    self.resends += 1
-                    head = self._inflight[0] if self._inflight else None
-                    if head is not None:
-                        stale = head.epoch < self._epoch
-                        head.rejected = True  # the `ok` that follows answers this request
-                        if stale:
-                            continue  # answers a copy sent before the last rewind
-                    r = ev.line
-                    if r > self._top + 1:
-                        raise LinkError(
-                            f"the printer asked to resend line {r}, but the last line sent was {self._top}"
-                        )
-                    if r <= self._top and r not in self._history:
-                        raise LinkError(f"the printer asked to resend line {r}, which is no longer in the history")
-                    if r - 1 > self._confirmed:
-                        confirm_through(r - 1)
-                    elif r - 1 < self._confirmed:
-                        log.warning("printer asks again for line %d, acknowledged before", r)
-                        self._confirmed = r - 1
-                    # Copies still in flight become stale; they absorb their own replies.
-                    self._epoch += 1
-                    self._next = r
-                elif kind == P.ERROR:
-                    log.info("printer: %s", ev.text)
-                    if self._inflight and error_seen_at is None:
-                        error_seen_at = time.monotonic()
-                elif kind == P.WAIT:
-                    # Idle with a line unanswered: the printer lost it.
-                    if self._inflight and time.monotonic() - self._inflight[0].sent_at > 0.25:
-                        self.timeouts += 1
-                        error_seen_at = None
-                        rewind(self._confirmed + 1)
-                elif kind == P.FATAL:
-                    fatal.append(ev.text)
-                    self._collect_fatal(fatal)
-                    break
-                elif kind == P.START:
-                    if not connecting:
-                        lost = "the printer restarted (firmware reset) during the print"
-                        break
-                elif kind == P.ACTION:
-                    action = ev.text.split()[0].lower() if ev.text else ""
-                    if action == "pause":
-                        self._pause_req.set()
-                    elif action == "resume":
-                        self._pause_req.clear()
-                    elif action == "cancel":
-                        self._cancel_req.set()
-                    elif action == "disconnect":
-                        lost = "the printer asked the host to disconnect"
-                        break
-                elif kind in (P.ECHO, P.OTHER):
-                    self._note_message(ev)
-                report(current_kind())
-                if state is not None and time.monotonic() - last_save > 5.0 and self.job_path:
-                    state.save(self.job_path)
-                    last_save = time.monotonic()
+            stop = self._exchange(stream, cancel, report, connecting)
         except _Lost as exc:
-            lost = str(exc)
+            stop = Stop(StopReason.LINK_LOST, str(exc))
+        except Exception as exc:  # noqa: BLE001 - any failure of the host ends the print the safe way
+            log.exception("print stopped by an error in the host")
+            stop = Stop(StopReason.FAILED, f"the print stopped on an error in arapp: {type(exc).__name__}: {exc}")
+        self._end(stream, stop, report, connecting)
 
-        if state is not None:
-            elapsed = time.monotonic() - t0
-            if fatal:
-                state.status, state.message = "halted", "; ".join(fatal)
-            elif lost:
-                state.status = "reset" if "restarted" in lost else "link_lost"
-                state.message = lost
-            elif cancelling:
-                state.status = CANCELLED
-            elif not connecting and state.status in (PRINTING, CANCELLING):
-                state.status = DONE
-            if self.job_path:
+    def _exchange(self, stream: LineStream, cancel, report: "_Reporter", connecting: bool) -> Stop | None:
+        """Write, wait for a reply or a deadline, hand it to the stream; until finished or stopped."""
+        while True:
+            now = time.monotonic()
+            if not connecting and not stream.cancelling and (
+                self._cancel_req.is_set() or (cancel is not None and cancel.is_set())
+            ):
+                for frame in stream.cancel(self.bed_height, self.capabilities.get("EMERGENCY_PARSER", False), now):
+                    self._write(frame)
+                report(stream.progress_kind(), force=True)
+            if not stream.cancelling:
+                stream.paused = self._pause_req.is_set()
+            for frame in stream.frames_to_send(now):
+                self._write(frame)
+            if stream.finished():
+                return None
+            deadline = stream.deadline(now)
+            if deadline is None and stream.paused and stream.poll_interval > 0:
+                deadline = stream.last_poll + stream.poll_interval
+            wake = deadline
+            if cancel is not None and not stream.cancelling:
+                # An external Event cannot wake the queue: look at it 4 times a second.
+                wake = now + 0.25 if wake is None else min(wake, now + 0.25)
+            ev = self._get_event(wake)
+            now = time.monotonic()
+            if ev is None:
+                if stream.paused and not stream.inflight:
+                    frame = stream.poll_frame(now)
+                    if frame is not None:
+                        self._write(frame)
+                elif deadline is not None and now >= deadline:
+                    step = stream.on_timeout(now)
+                    if isinstance(step, Stop):
+                        return Stop(step.reason, f"{step.message} on {self.port}")
+                    if step is Step.REWOUND:
+                        log.info("no answer: sending from line %d again", stream.next_number)
+                report(stream.progress_kind())
+                continue
+            if ev is _WAKE:
+                report(stream.progress_kind(), force=True)
+                continue
+            if isinstance(ev, BaseException):
+                return Stop(StopReason.LINK_LOST, f"the connection to {self.port} was lost: {ev}")
+            stop = self._on_reply(stream, ev, now, report, connecting)
+            if stop is not None:
+                return stop
+            report(stream.progress_kind())
+            self._save_now_and_then(stream.state)
+
+    def _on_reply(self, stream: LineStream, ev: P.Reply, now: float, report, connecting: bool) -> Stop | None:
+        """Hand one reply to the stream; a Stop when it ends the exchange."""
+        if ev.temperatures:
+            for name, (actual, target) in ev.temperatures.items():
+                if target is None and name in self.temperatures:
+                    target = self.temperatures[name][1]  # heat-up lines carry no target
+                self.temperatures[name] = (actual, target)
+            if stream.state is not None:
+                stream.state.read_temperatures(ev.temperatures)
+            report(stream.progress_kind(), force=True)
+        kind = ev.kind
+        if kind == P.OK:
+            stream.on_ok(now)
+        elif kind == P.RESEND:
+            step = stream.on_resend(ev.line, now)
+            if isinstance(step, Stop):
+                return step
+        elif kind == P.ERROR:
+            log.info("printer: %s", ev.text)
+            stream.on_error(now)
+        elif kind == P.WAIT:
+            stream.on_wait(now)
+        elif kind in (P.BUSY, P.TEMPERATURE):
+            stream.on_keepalive(ev, now)
+        elif kind == P.FATAL:
+            messages = [ev.text]
+            self._collect_fatal(messages)
+            return Stop(StopReason.HALTED, "; ".join(messages))
+        elif kind == P.START:
+            if not connecting:
+                return stream.on_start()
+        elif kind == P.ACTION:
+            step = stream.on_action(ev.text)
+            if isinstance(step, Stop):
+                return step
+            if step is Step.PAUSE:
+                self._pause_req.set()
+            elif step is Step.RESUME:
+                self._pause_req.clear()
+            elif step is Step.CANCEL:
+                self._cancel_req.set()
+        else:
+            self._note_message(ev)
+        return None
+
+    def _save_now_and_then(self, state: JobState | None) -> None:
+        """Save the job every 5 s. A failed save does not stop the print (the file only matters
+        if the link drops); it is reported (progress message, final state) and tried again."""
+        if state is None or not self.job_path or time.monotonic() - self._last_save < 5.0:
+            return
+        self._last_save = time.monotonic()
+        try:
+            state.save(self.job_path)
+            self.save_error = None
+        except OSError as exc:
+            if self.save_error is None:
+                log.warning("cannot save the job file %s: %s", self.job_path, exc)
+            self.save_error = f"cannot save the job file {self.job_path}: {exc.strerror or exc}"
+            state.message = self.save_error
+
+    def _end(self, stream: LineStream, stop: Stop | None, report: "_Reporter", connecting: bool) -> None:
+        """Every way out of a run ends here: printer made safe, job saved, one exception (or none)."""
+        finish = stream.finish(stop)
+        state = stream.state
+        if stop is not None and not connecting and stop.reason is not StopReason.LINK_LOST:
+            self._safe_stop()
+        saved = None
+        if state is not None and self.job_path:
+            try:
                 state.save(self.job_path)
-            if progress is not None:
-                progress(self._progress(state, state.status, elapsed, done_at_start))
-        if fatal:
-            raise PrinterHalted(f"the printer halted: {'; '.join(fatal)}", self.state, self.job_path)
-        if lost:
-            cls = PrinterReset if "restarted" in lost else LinkLost
-            raise cls(lost, state, self.job_path if state is not None else None)
+                saved = self.job_path
+                self.save_error = None
+            except OSError as exc:
+                self.save_error = f"cannot save the job file {self.job_path}: {exc.strerror or exc}"
+                if stop is None:
+                    state.message = self.save_error
+        if state is not None:
+            report(finish.status, force=True)
+        if stop is None:
+            return
+        message = stop.message
+        if state is not None and self.job_path and saved is None:
+            message += f" ({self.save_error})"
+        if stop.reason is StopReason.HALTED:
+            raise PrinterHalted(f"the printer halted: {message}", state, saved)
+        if stop.reason in (StopReason.RESET, StopReason.BAD_RESEND):
+            raise PrinterReset(message, state, saved)
+        if stop.reason is StopReason.FAILED:
+            raise LinkError(message, state, saved)
+        raise LinkLost(message, state, saved)
 
-    def _send_poll(self) -> None:
-        """Ask for temperatures as a numbered line (used while paused)."""
-        item = _Item("M105")
-        frame = P.frame(self._next, item.text)
-        self._history[self._next] = (frame, item)
-        self._top = self._next
-        self._write(frame)
-        self._inflight.append(_Copy(self._next, len(frame), self._epoch, time.monotonic()))
-        self._next += 1
+    def _safe_stop(self) -> None:
+        """Heaters, fan and motors off, as unnumbered lines (the line numbering may be what failed).
+
+        No move: the nozzle stays where it is, so a resumed job's saved Z is still right.
+        """
+        try:
+            for command in SAFE_STOP:
+                self._write(f"{command}\n".encode("ascii"))
+        except _Lost:
+            return
+        # Let the answers arrive (at most a second) so that they do not meet a later run.
+        deadline = time.monotonic() + 1.0
+        oks = 0
+        while oks < len(SAFE_STOP):
+            ev = self._get_event(deadline)
+            if ev is None or isinstance(ev, BaseException):
+                return
+            if ev is not _WAKE and ev.kind == P.OK:
+                oks += 1
 
     def _collect_fatal(self, fatal: list[str]) -> None:
         """Gather the rest of a halt message (Marlin prints several lines)."""
@@ -609,7 +498,7 @@ class SerialPrinter(PrintLink):
             ev = self._get_event(deadline)
             if ev is None or isinstance(ev, BaseException):
                 return
-            if ev.kind in (P.FATAL, P.ECHO) and ev.text and ev.text not in fatal:
+            if ev is not _WAKE and ev.kind in (P.FATAL, P.ECHO) and ev.text and ev.text not in fatal:
                 fatal.append(ev.text)
 
     def _note_message(self, ev: P.Reply) -> None:
@@ -624,22 +513,41 @@ class SerialPrinter(PrintLink):
             self.messages.append(text)
             del self.messages[:-50]
 
-    def _progress(self, state: JobState, kind: str, elapsed: float, done_at_start: int) -> Progress:
-        total = state.commands_total
-        done = state.commands_done
-        percent = 100.0 * done / total if total else 100.0
-        return Progress(
+
+
+class _Reporter:
+    """Progress reports: at most 10 per second, but every change of state and of layer (the AR
+    preview highlights the layer being printed from these reports)."""
+
+    def __init__(self, link: SerialPrinter, progress: ProgressCallback | None, state: JobState | None):
+        self.link, self.progress, self.state = link, progress, state
+        self.t0 = time.monotonic()
+        self.done_at_start = state.commands_done if state else 0
+        self.last = (None, None, 0.0)  # kind, layer, time
+
+    def __call__(self, kind: str, force: bool = False) -> None:
+        state = self.state
+        if self.progress is None or state is None:
+            return
+        now = time.monotonic()
+        last_kind, last_layer, last_at = self.last
+        if not force and kind == last_kind and state.layer == last_layer and now - last_at < 0.1:
+            return
+        self.last = (kind, state.layer, now)
+        elapsed = now - self.t0
+        total, done = state.commands_total, state.commands_done
+        self.progress(Progress(
             state=kind,
             lines_done=done,
             lines_total=total,
             layer=state.layer,
             layer_count=state.layer_count,
-            percent=percent,
+            percent=100.0 * done / total if total else 100.0,
             elapsed_s=elapsed,
-            eta_s=eta(done - done_at_start, total - done_at_start, elapsed),
-            temperatures=dict(self.temperatures),
+            eta_s=eta(done - self.done_at_start, total - self.done_at_start, elapsed),
+            temperatures=dict(self.link.temperatures),
             message=state.message,
-        )
+        ))
 
 
 class _Lost(Exception):
