@@ -25,6 +25,7 @@ import time
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import pytest
+import requests
 
 from arapp.printing.link.octoprint import (
     ApiKeyError,
@@ -286,3 +287,126 @@ def test_cli_prints_through_octoprint_and_never_shows_key(octo, tmp_path, capsys
     rc = main(["print", str(g), "--octoprint", octo.url, "--api-key-file", str(keyfile)])
     err = capsys.readouterr().err
     assert rc == 2 and "chmod 600" in err and KEY not in err
+
+
+class HeaderRecorder:
+    """A second local server: records the headers of every request and answers like an idle OctoPrint
+    (so a link that followed a redirect here would carry on talking to it)."""
+
+    def __init__(self):
+        self.headers: list[dict] = []
+        rec = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def log_message(self, *args):
+                pass
+
+            def do_GET(self):
+                rec.headers.append({k.lower(): v for k, v in self.headers.items()})
+                raw = json.dumps({"text": "OctoPrint 1.11.8", "current": {"state": "Operational"}}).encode()
+                self.send_response(200)
+                self.send_header("Content-Type", "application/json")
+                self.send_header("Content-Length", str(len(raw)))
+                self.end_headers()
+                self.wfile.write(raw)
+
+        self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.port = self.server.server_address[1]
+        threading.Thread(target=self.server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
+
+    def close(self):
+        self.server.shutdown()
+        self.server.server_close()
+
+
+class Redirector:
+    """The OctoPrint URL the user gave: answers every request with `code` to the same path at `target`."""
+
+    def __init__(self, target: str, code: int = 307):
+        self.keys_seen: list[str] = []
+        red = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def log_message(self, *args):
+                pass
+
+            def do_GET(self):
+                red.keys_seen.append(self.headers.get("X-Api-Key", ""))
+                self.send_response(code)
+                self.send_header("Location", target + self.path)
+                self.send_header("Content-Length", "0")
+                self.end_headers()
+
+        self.server = ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        self.url = f"http://127.0.0.1:{self.server.server_address[1]}"
+        threading.Thread(target=self.server.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True).start()
+
+    def close(self):
+        self.server.shutdown()
+        self.server.server_close()
+
+
+@pytest.mark.parametrize("host", ["localhost", "127.0.0.1"])  # another host name; the same host, another port
+@pytest.mark.parametrize("code", [301, 302, 307, 308])
+def test_api_key_never_follows_a_redirect_to_another_server(host, code):
+    other = HeaderRecorder()
+    red = Redirector(f"http://{host}:{other.port}", code)
+    try:
+        link = OctoPrintLink(red.url, KEY, timeout=5)
+        link.connect()  # followed to the other server, which answers as an OctoPrint would
+        link.close()
+        assert red.keys_seen and set(red.keys_seen) == {KEY}  # the server the user named gets the key
+        assert other.headers, "the redirect was not followed at all"
+        assert all("x-api-key" not in h for h in other.headers), "the API key reached another server"
+    finally:
+        red.close()
+        other.close()
+
+
+def test_api_key_is_kept_on_a_redirect_within_the_same_server(octo):
+    # The rule written in the test: same scheme, host and port is the same server (OctoPrint behind a
+    # reverse proxy redirecting /api/x to /api/x/); there the key must still arrive.
+    from arapp.printing.link.octoprint import KeySession
+
+    session = KeySession()
+    session.headers["X-Api-Key"] = KEY
+    req = session.prepare_request(requests.Request("GET", octo.url + "/api/version"))
+    resp = requests.Response()
+    resp.request = session.prepare_request(requests.Request("GET", octo.url + "/old"))
+    session.rebuild_auth(req, resp)
+    assert req.headers.get("X-Api-Key") == KEY
+
+
+@pytest.mark.parametrize("url", ["http://user:s3cretPW@{hostport}", "http://:s3cretPW@{hostport}/",
+                                 "https://admin:s3cretPW@{hostport}/octoprint"])
+def test_credentials_in_the_url_are_refused_without_showing_them(octo, url):
+    hostport = octo.url.split("://", 1)[1]
+    with pytest.raises(ValueError) as err:
+        OctoPrintLink(url.format(hostport=hostport), KEY)
+    assert "s3cretPW" not in str(err.value) and "***@" in str(err.value)
+    assert octo.keys_seen == []  # refused before any request
+
+
+def test_cli_refuses_credentials_in_the_url_and_stores_them_nowhere(octo, tmp_path, capsys):
+    from arapp.cli import main
+
+    keyfile = save_api_key(tmp_path / "octoprint.key", KEY)
+    g = tmp_path / "part.gcode"
+    g.write_text("\n".join(gcode(layers=1, per_layer=5)) + "\n")
+    url = octo.url.replace("http://", "http://maker:s3cretPW@")
+    rc = main(["print", str(g), "--octoprint", url, "--api-key-file", str(keyfile), "--job", str(tmp_path / "j.json")])
+    out, err = capsys.readouterr()
+    assert rc != 0 and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+    assert "s3cretPW" not in out + err
+    for f in tmp_path.rglob("*"):
+        if f.is_file():
+            assert b"s3cretPW" not in f.read_bytes(), f"the password is stored in {f.name}"
+    assert octo.uploads == []
+
+
+def test_redact_url():
+    from arapp.printing.link.octoprint import redact_url
+
+    assert redact_url("http://u:p@h:5000/x?y=1") == "http://***@h:5000/x?y=1"
+    assert redact_url("http://h/x") == "http://h/x"

@@ -8,6 +8,12 @@ progress: completion %, file position in bytes, times), `POST /api/job`
 (temperatures). The API key goes in the `X-Api-Key` header only: it is never
 logged, printed or put in an error message, and key files are written with
 mode 600 (and refused when others can read them).
+
+The key never leaves for another host: `KeySession` drops `X-Api-Key` from a
+redirect to another scheme/host/port (requests keeps custom headers on every
+redirect, it strips only `Authorization`). A URL holding a user name or
+password (`http://user:pw@host`) is refused, and `redact_url` is what any
+message shows of a URL, so a password is never printed nor stored in a job file.
 """
 
 from __future__ import annotations
@@ -21,6 +27,9 @@ import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from urllib.parse import urlsplit, urlunsplit
+
+import requests
 
 from .base import (
     CANCELLED,
@@ -50,6 +59,51 @@ class OctoPrintError(LinkError):
 
 class ApiKeyError(ValueError):
     """An API key file that is missing, empty or readable by others."""
+
+
+API_KEY_HEADER = "X-Api-Key"
+
+
+def redact_url(url: str) -> str:
+    """`url` with any user name and password replaced by `***` (what messages and job files may show)."""
+    try:
+        parts = urlsplit(str(url))
+    except ValueError:
+        return "<unparsable URL>"
+    if "@" not in parts.netloc:
+        return str(url)
+    host = parts.netloc.rpartition("@")[2]
+    return urlunsplit((parts.scheme, f"***@{host}", parts.path, parts.query, parts.fragment))
+
+
+def check_octoprint_url(url: str) -> str:
+    """The OctoPrint base URL without a trailing slash, when it is http(s)://host[:port][/path] with no
+    credentials, query or fragment; ValueError (showing the URL redacted) otherwise."""
+    text = str(url).strip()
+    try:
+        parts = urlsplit(text)
+        _ = parts.port  # raises ValueError for a port that is not a number or out of range
+    except ValueError:
+        raise ValueError(f"OctoPrint URL {redact_url(text)!r} cannot be parsed; give e.g. http://octopi.local") from None
+    if parts.scheme not in ("http", "https") or not parts.hostname:
+        raise ValueError(f"OctoPrint URL must start with http:// or https:// and name a host, got {redact_url(text)!r}")
+    if parts.username is not None or parts.password is not None:
+        raise ValueError(f"OctoPrint URL {redact_url(text)!r} holds a user name or password; give it without "
+                         "them (arapp authenticates with the API key file, and would otherwise print and store "
+                         "the password)")
+    if parts.query or parts.fragment:
+        raise ValueError(f"OctoPrint URL {text!r} has a query or fragment; give the server's base URL only")
+    return text.rstrip("/")
+
+
+class KeySession(requests.Session):
+    """A requests Session that sends the API key only to the server it was meant for: on a redirect to
+    another scheme, host or port the `X-Api-Key` header is removed (as requests does for Authorization)."""
+
+    def rebuild_auth(self, prepared_request, response):
+        super().rebuild_auth(prepared_request, response)
+        if self.should_strip_auth(response.request.url, prepared_request.url):
+            prepared_request.headers.pop(API_KEY_HEADER, None)
 
 
 def save_api_key(path, key: str) -> Path:
@@ -93,9 +147,7 @@ class OctoPrintLink(PrintLink):
 
     def __init__(self, url: str, api_key: str, *, poll_interval: float = 1.0, timeout: float = 30.0,
                  job_path=None, name: str = "arapp.gcode"):
-        if not re.match(r"^https?://", url):
-            raise ValueError(f"OctoPrint URL must start with http:// or https://, got {url!r}")
-        self.url = url.rstrip("/")
+        self.url = check_octoprint_url(url)
         self._key = api_key
         self.poll_interval = float(poll_interval)
         self.timeout = float(timeout)
@@ -112,8 +164,6 @@ class OctoPrintLink(PrintLink):
 
     # ----------------------------------------------------------------- http
     def _request(self, method: str, path: str, **kw):
-        import requests
-
         if self._session is None:
             raise LinkError("not connected to OctoPrint: call connect() first")
         try:
@@ -132,10 +182,8 @@ class OctoPrintLink(PrintLink):
         return r
 
     def connect(self) -> None:
-        import requests
-
-        self._session = requests.Session()
-        self._session.headers["X-Api-Key"] = self._key
+        self._session = KeySession()
+        self._session.headers[API_KEY_HEADER] = self._key
         self.version = self._request("GET", "/api/version").json().get("text", "")
         current = self._request("GET", "/api/connection").json().get("current", {})
         if str(current.get("state", "")).lower().startswith(("closed", "offline", "error")):
