@@ -22,7 +22,7 @@ import numpy as np
 
 from tracking.anchors.detect import Observation
 from tracking.anchors.edges import refine_squares
-from tracking.anchors.model import AnchorModel
+from tracking.anchors.model import AnchorModel, square_corners
 from tracking.camera import Camera
 
 _SUBPIX = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
@@ -61,9 +61,11 @@ class QRTracking:
         self.models = [m for m in models if m.kind == "qr"]
         self.by_text = {m.spec.text: m for m in self.models}
         self.camera = camera
-        # The ArUco-based detector finds codes fastest; the classic one decodes some it cannot (perspective).
-        self.finder = cv2.QRCodeDetectorAruco() if detector == "aruco" else cv2.QRCodeDetector()
+        # The ArUco-based detector finds codes fastest; the classic one decodes some it cannot (perspective,
+        # blur) and misses others, so a missing code is searched with both (`detector` says which first).
         self.decoder = cv2.QRCodeDetector()
+        aruco = cv2.QRCodeDetectorAruco()
+        self.detectors = (aruco, self.decoder) if detector == "aruco" else (self.decoder, aruco)
         self.reset()
 
     def reset(self) -> None:
@@ -140,10 +142,17 @@ class QRTracking:
             wanted = missing if expected is None else [m for m in missing if m.index in expected]
             if wanted:
                 roi = self._roi(wanted, predicted_camera_from_world, gray.shape) if expected is not None else None
-                for m, n, pts in self._decode(gray, roi):
-                    if m.index not in self.state:
+                for m, n, pts, corners in self._decode(gray, roi, wanted):
+                    if m.index in self.state:
+                        continue
+                    if pts is not None:
                         self.state[m.index] = (n, pts)
                         out[m.index] = self._observation(m, n, pts)
+                    else:
+                        # finders not refitted (blur, glare, curved paper): the decoder's symbol corners,
+                        # not tracked (the code is decoded again next frame)
+                        out[m.index] = Observation(m.index, square_corners(m.spec.length), corners,
+                                                   np.full(4, -10), 1, square=True)
         self.prev = gray
         return [out[k] for k in sorted(out)]
 
@@ -183,7 +192,6 @@ class QRTracking:
         """Pixel box (x0, y0, x1, y1) around where the prediction puts the codes (with margin), or None."""
         if camera_from_world is None:
             return None
-        from tracking.anchors.model import square_corners
         from tracking.anchors.pose import project
         pts = []
         for m in models:
@@ -205,8 +213,14 @@ class QRTracking:
             return None
         return int(x0), int(y0), int(x1), int(y1)
 
-    def _decode(self, gray, roi):
-        """Decoded codes matching anchors: list of (model, modules n, refined (36,2) corners)."""
+    def _decode(self, gray, roi, wanted=None):
+        """Decoded codes matching anchors: list of (model, modules n, (36,2) finder corners or None, (4,2)
+        symbol corners). The finder corners are None when the refit failed: the decoder's own corners
+        (about a pixel) then carry the code, so every code OpenCV reads still gives a pose.
+
+        Both OpenCV detectors search, the ArUco-based one first (fastest); the classic one only while a
+        `wanted` anchor (default: all) is still missing, since it finds codes the other misses (blur,
+        perspective) and the other way round."""
         import time
         t0 = time.perf_counter()
         x0 = y0 = 0
@@ -214,35 +228,76 @@ class QRTracking:
         if roi is not None:
             x0, y0, x1, y1 = roi
             img = gray[y0:y1, x0:x1]
-        found = []
-        try:
-            ok, texts, points, straight = self.finder.detectAndDecodeMulti(img)
-        except cv2.error:
-            ok = False
+        want = {m.spec.text for m in (wanted if wanted is not None else self.models)}
+        codes: dict[str, tuple[np.ndarray, object]] = {}
         self.decoded_texts = []
-        if ok and points is not None:
-            straight = list(straight) if straight is not None else []
-            texts, straight = list(texts), straight + [None] * (len(texts) - len(straight))
-            for i, text in enumerate(texts):
-                if not text:
-                    texts[i], straight[i] = self._decode_again(img, points[i].reshape(4, 2))
-            for i, text in enumerate(texts):
-                self.decoded_texts.append(text)
-                m = self.by_text.get(text)
-                if m is None or straight is None or i >= len(straight) or straight[i] is None:
-                    continue
-                n = int(straight[i].shape[0])
-                if n < 21 or (n - 17) % 4:
-                    continue
-                corners = points[i].reshape(4, 2).astype(np.float64) + [x0, y0]
+        for det in self.detectors:
+            for text, corners, straight in self._codes(det, img):
+                if text not in self.decoded_texts:
+                    self.decoded_texts.append(text)
+                if text not in codes or (codes[text][1] is None and straight is not None):
+                    codes[text] = (corners, straight)
+            if want <= codes.keys():
+                break
+        found = []
+        for text, (corners, straight) in codes.items():
+            m = self.by_text.get(text)
+            if m is None:
+                continue
+            corners = corners.astype(np.float64) + [x0, y0]
+            n = int(straight.shape[0]) if straight is not None else 0
+            pts = None
+            if n >= 21 and (n - 17) % 4 == 0:
                 H, _ = cv2.findHomography(np.array([[0, 0], [n, 0], [n, n], [0, n]], float), corners, 0)
-                if H is None:
-                    continue
-                pts = self._refine(gray, H, n)
-                if pts is not None:
-                    found.append((m, n, pts))
+                if H is not None:
+                    pts = self._refine(gray, H, n)
+            found.append((m, n, pts, corners))
         self.decode_ms = (time.perf_counter() - t0) * 1000
         return found
+
+    def _codes(self, det, img) -> list[tuple[str, np.ndarray, object]]:
+        """(text, (4,2) corners in img, straight symbol or None) of every code `det` finds and that decodes.
+
+        A code whose text is not UTF-8 (Shift-JIS, Kanji mode) makes OpenCV's Python binding raise
+        UnicodeDecodeError for the whole call, hiding every other code of the frame; the codes are then
+        decoded one at a time and that one skipped. Codes found but not decoded get a second try with the
+        classic decoder in a crop around them."""
+        try:
+            ok, texts, points, straight = det.detectAndDecodeMulti(img)
+        except UnicodeDecodeError:
+            return self._codes_one_by_one(det, img)
+        except cv2.error:
+            return []
+        if not ok or points is None:
+            return []
+        straight = list(straight) if straight is not None else []
+        straight += [None] * (len(texts) - len(straight))
+        out = []
+        for text, p, st in zip(texts, points, straight):
+            corners = np.asarray(p, np.float64).reshape(4, 2)
+            if not text:
+                text, st = self._decode_again(img, corners)
+            if text:
+                out.append((text, corners, st if st is not None and np.size(st) else None))
+        return out
+
+    def _codes_one_by_one(self, det, img) -> list[tuple[str, np.ndarray, object]]:
+        try:
+            ok, points = det.detectMulti(img)
+        except cv2.error:
+            return []
+        if not ok or points is None:
+            return []
+        out = []
+        for p in points:
+            p = np.asarray(p, np.float32).reshape(1, 4, 2)
+            try:
+                text, st = det.decode(img, p)
+            except (UnicodeDecodeError, cv2.error):
+                continue  # a foreign code with text Python cannot read: not an anchor of ours
+            if text:
+                out.append((text, p.reshape(4, 2).astype(np.float64), st if st is not None and np.size(st) else None))
+        return out
 
     def _decode_again(self, img, corners):
         """Decode one found-but-undecoded code with the classic detector in a crop around it."""
@@ -252,6 +307,6 @@ class QRTracking:
         x1, y1 = np.minimum(np.ceil(hi + pad), [img.shape[1], img.shape[0]]).astype(int)
         try:
             text, _, straight = self.decoder.detectAndDecode(img[y0:y1, x0:x1])
-        except cv2.error:
+        except (cv2.error, UnicodeDecodeError):
             return "", None
         return text, straight
