@@ -31,7 +31,7 @@ def test_wrong_corners_are_refused():
 
 def test_cli_saves_a_valid_profile(tmp_path):
     path = tmp_path / "printer.json"
-    assert main(["printer", "bed-anchor", "--printer", str(path), "--center", "30", "180"]) == 0
+    assert main(["printer", "bed-anchor", "--printer", str(path), "--create", "--center", "30", "180"]) == 0
     profile = load_profile(path)
     assert np.allclose(profile.bed_from_anchor[:3, 3], [30, 180, 0])
     assert profile.bed_anchor.id == 42

@@ -179,10 +179,16 @@ class CalibrationResult:
         return "\n".join(lines)
 
 
+MIN_VIEWS = 3  # fewest board views that determine fx, fy, cx, cy and five distortion terms
+
+
 def solve(views: list[View], width: int, height: int, coverage: float = float("nan"), min_views: int = 5,
           flags: int = 0, outlier_factor: float = 3.0) -> CalibrationResult:
     """cv2.calibrateCamera on the views (k1 k2 p1 p2 k3); views whose RMS error exceeds `outlier_factor`
     times the median are dropped once and the solve repeated."""
+    if min_views < MIN_VIEWS:
+        raise CalibrationError(f"min_views is {min_views}; a calibration needs at least {MIN_VIEWS} views of the "
+                               "board (intrinsics and distortion are not determined by fewer)")
     if len(views) < min_views:
         raise CalibrationError(f"only {len(views)} usable views of the board; need at least {min_views}. "
                                "Show the board at more positions and angles (tilted, near the image corners)")

@@ -6,6 +6,7 @@ the camera frame (x right, y down, z forward), metres.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -179,25 +180,71 @@ class Camera:
 
     @classmethod
     def load_yaml(cls, path: str | Path) -> "Camera":
-        """Read an OpenCV calibration file (YAML/XML/JSON FileStorage), as written by OpenCV's own tools."""
+        """Read an OpenCV calibration file (YAML/XML/JSON FileStorage), as written by OpenCV's own tools.
+
+        Needs camera_matrix (3x3 !!opencv-matrix), image_width and image_height (pixels); distortion_coefficients
+        is optional (none = no distortion). Raises CalibrationError naming the file and the field.
+        """
         path = Path(path)
         if not path.is_file():
             raise CalibrationError(f"calibration file {path} does not exist")
         try:
             fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-        except cv2.error as e:
-            raise CalibrationError(f"{path}: not an OpenCV calibration file ({e.err.strip()})") from None
+        except (cv2.error, SystemError) as e:
+            # OpenCV's parser reports a syntax error as cv2.error, or (through the Python binding of the
+            # constructor) as a SystemError whose cause is that cv2.error.
+            raise CalibrationError(f"{path}: not a valid OpenCV calibration file ({_cv_message(e)}); "
+                                   "write it with 'arapp calibrate' or cv2.FileStorage") from None
         try:
             if not fs.isOpened():
                 raise CalibrationError(f"{path}: cannot be read as OpenCV FileStorage YAML")
-            K = fs.getNode("camera_matrix").mat()
-            dist = fs.getNode("distortion_coefficients").mat()
-            w = fs.getNode("image_width")
-            h = fs.getNode("image_height")
-            if K is None:
-                raise CalibrationError(f"{path}: camera_matrix missing")
-            if w.empty() or h.empty():
-                raise CalibrationError(f"{path}: image_width / image_height missing")
-            return cls(K, np.zeros(5) if dist is None else dist.ravel(), int(w.real()), int(h.real()))
+            K = _read_matrix(fs, "camera_matrix", path)
+            dist = _read_matrix(fs, "distortion_coefficients", path, required=False)
+            size = {}
+            for key in ("image_width", "image_height"):
+                node = fs.getNode(key)
+                if node.empty():
+                    raise CalibrationError(f"{path}: {key}: missing (the image size in pixels the calibration is for)")
+                value = node.real() if node.isReal() or node.isInt() else float("nan")
+                if not (np.isfinite(value) and value == int(value) and 0 < value <= 100_000):
+                    raise CalibrationError(f"{path}: {key}: must be a positive whole number of pixels")
+                size[key] = int(value)
+            if K.shape != (3, 3):
+                raise CalibrationError(f"{path}: camera_matrix: must be 3x3, got {K.shape[0]}x{K.shape[1]}")
+            try:
+                return cls(K, np.zeros(5) if dist is None else dist.ravel(), size["image_width"], size["image_height"])
+            except CalibrationError as e:
+                raise CalibrationError(f"{path}: {e}") from None
         finally:
             fs.release()
+
+
+def _cv_message(exc: BaseException) -> str:
+    """The short text of an OpenCV error (the cv2.error behind a SystemError when there is one)."""
+    cause = exc.__cause__ or exc.__context__
+    err = cause if isinstance(cause, cv2.error) else exc
+    # Parsing errors read "FILE(LINE): what"; OpenCV versions put it in `err` or in `func`.
+    parts = [str(getattr(err, name, "") or "") for name in ("err", "func")]
+    located = [p for p in parts if re.search(r"\(\d+\): ", p)]
+    text = located[0] if located else max(parts, key=len) or str(err)
+    text = re.sub(r"^.*\((\d+)\): ", r"line \1: ", text.strip())
+    return " ".join(text.split())[:200]
+
+
+def _read_matrix(fs, key: str, path: Path, required: bool = True) -> np.ndarray | None:
+    """A finite matrix stored as an !!opencv-matrix under `key` (None when absent and not required)."""
+    node = fs.getNode(key)
+    if node.empty():
+        if required:
+            raise CalibrationError(f"{path}: {key}: missing")
+        return None
+    try:
+        mat = node.mat()
+    except cv2.error:  # a plain list or a scalar, not a matrix map
+        mat = None
+    if mat is None:
+        raise CalibrationError(f"{path}: {key}: must be an !!opencv-matrix (rows, cols, dt, data)")
+    mat = np.asarray(mat, dtype=float)
+    if not np.all(np.isfinite(mat)):
+        raise CalibrationError(f"{path}: {key}: holds a value that is not a finite number")
+    return mat

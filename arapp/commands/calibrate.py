@@ -21,6 +21,28 @@ def add_arguments(parser):
     parser.add_argument("-o", "--output", required=True, help="calibration YAML to write (OpenCV FileStorage)")
 
 
+def check_args(args) -> None:
+    """Refuse numbers no board or solve can use, naming the flag (before any camera is opened)."""
+    from tracking.calibration import MIN_VIEWS
+    from tracking.errors import CalibrationError
+
+    def need(ok: bool, flag: str, rule: str, value) -> None:
+        if not ok:
+            raise CalibrationError(f"{flag} must be {rule}, got {value!r}")
+
+    need(2 <= args.squares_x <= 100, "--squares-x", "2 to 100", args.squares_x)
+    need(2 <= args.squares_y <= 100, "--squares-y", "2 to 100", args.squares_y)
+    need(0 < args.square_length <= 1.0, "--square-length", "above 0 and at most 1 (metres)", args.square_length)
+    if args.board == "charuco":
+        need(0 < args.marker_length < args.square_length, "--marker-length",
+             f"above 0 and below --square-length ({args.square_length:g} m)", args.marker_length)
+    need(MIN_VIEWS <= args.min_views <= 1000, "--min-views", f"{MIN_VIEWS} to 1000 (views of the board)", args.min_views)
+    need(args.min_views <= args.max_views <= 1000, "--max-views", f"--min-views ({args.min_views}) to 1000",
+         args.max_views)
+    need(0 <= args.min_sharpness < 1e6, "--min-sharpness", "0 or more", args.min_sharpness)
+    need(1 <= args.every <= 10000, "--every", "1 to 10000 (frames)", args.every)
+
+
 def run(args) -> int:
     from pathlib import Path
 
@@ -29,6 +51,7 @@ def run(args) -> int:
     from tracking.calibration import BoardSpec, ViewCollector, solve
     from tracking.errors import CalibrationError
 
+    check_args(args)
     board = BoardSpec(args.board, args.squares_x, args.squares_y, args.square_length,
                       args.marker_length if args.board == "charuco" else None, args.dictionary)
     col = ViewCollector(board, min_sharpness=args.min_sharpness)
@@ -71,6 +94,10 @@ def run(args) -> int:
     if col.coverage < 0.5:
         print(f"warning: the board covered only {col.coverage * 100:.0f} % of the image; views near the edges and "
               "corners give better distortion estimates")
-    res.camera.save_yaml(args.output, {"rms_px": res.rms, "views": len(res.used)})
+    out = Path(args.output)
+    tmp = out.with_name(f".{out.name}.tmp{out.suffix}")  # OpenCV picks the format by suffix: keep it
+    out.parent.mkdir(parents=True, exist_ok=True)
+    res.camera.save_yaml(tmp, {"rms_px": res.rms, "views": len(res.used)})
+    tmp.replace(out)  # never a half-written calibration under the final name
     print(f"wrote {args.output}")
     return 0
