@@ -120,7 +120,10 @@ def test_a_source_with_its_own_calibration_is_left_alone(repo_root, config_dir):
 
 def test_the_gui_opens_a_plain_video_without_a_calibration_file(plain_video, config_dir):
     """`arapp gui --source v4l2:0` failed with 'pass --calibration cam.yaml'; a plain video did too."""
-    from arapp.gui import sourcespec
+    try:
+        from arapp.app import sourcespec  # after the app-model refactor
+    except ImportError:
+        from arapp.gui import sourcespec
 
     src = sourcespec.open_spec(f"file:{plain_video}")
     assert src.camera.width == 320  # old code: SourceError "... has no calibration; pass --calibration ..."
@@ -198,3 +201,31 @@ def test_lost_hint_shows_after_a_second_of_lost_tracking(qtbot):
     assert not hint.isHidden() and "ArUco id 40" in hint.text()
     hint.update_state("marker", anchors, now=11.3)
     assert hint.isHidden()
+
+
+# -- help -------------------------------------------------------------------------------------------
+
+def test_help_lists_the_windows_shortcuts_and_about(qtbot, config_dir):
+    from PySide6.QtGui import QAction, QKeySequence
+    from PySide6.QtWidgets import QMainWindow
+
+    from arapp.gui.help import ShortcutsDialog, about_text, add_help_menu, shortcuts
+
+    win = QMainWindow()
+    qtbot.addWidget(win)
+    for text, key in (("Play / pause", "Space"), ("Reset tracking", "R"), ("Open source...", "Ctrl+O")):
+        a = QAction(text, win)
+        a.setShortcut(QKeySequence(key))
+        win.addAction(a)
+    menu = add_help_menu(win)
+    rows = shortcuts(win)
+    keys = dict(rows)
+    assert keys["Space"] == "Play / pause" and keys["R"] == "Reset tracking" and keys["Ctrl+O"] == "Open source"
+    assert keys["F1"] == "Keyboard shortcuts"
+    assert any(k == "Mouse wheel" for k, _ in rows)
+    dlg = ShortcutsDialog(rows)
+    qtbot.addWidget(dlg)
+    assert dlg.table.rowCount() == len(rows) and dlg.table.item(0, 1).text() == rows[0][1]
+    assert [a.text() for a in menu.actions()] == ["Keyboard shortcuts", "About arapp"]
+    text = about_text()
+    assert "arapp 0." in text and "OpenCV" in text and str(config_dir) in text
