@@ -229,3 +229,17 @@ def test_help_lists_the_windows_shortcuts_and_about(qtbot, config_dir):
     assert [a.text() for a in menu.actions()] == ["Keyboard shortcuts", "About arapp"]
     text = about_text()
     assert "arapp 0." in text and "OpenCV" in text and str(config_dir) in text
+
+
+def test_first_hour_dialogs_fit_a_1366x768_screen(qtbot, config_dir):
+    """Each of these windows can be made small enough for a 768 px screen (less a panel and title bar)."""
+    from arapp.gui.calibration_wizard import CalibrationWizard
+    from arapp.gui.help import ShortcutsDialog
+    from arapp.gui.printer_setup import PrinterSetupDialog
+    from arapp.gui.welcome import WelcomeView
+
+    for w in (CalibrationWizard(lambda: None), PrinterSetupDialog(ports=[]), WelcomeView(),
+              ShortcutsDialog([("F1", "Keyboard shortcuts")] * 30)):
+        qtbot.addWidget(w)
+        hint = w.minimumSizeHint()
+        assert hint.width() <= 1280 and hint.height() <= 660, (type(w).__name__, hint)

@@ -54,6 +54,12 @@ def bgr_to_qimage(img: np.ndarray) -> QImage:
     return QImage(rgb.data, w, h, rgb.strides[0], fmt).copy()
 
 
+def _wrapped(text: str) -> QLabel:
+    label = QLabel(text)
+    label.setWordWrap(True)
+    return label
+
+
 class _Signals(QObject):
     """Emitted from the reader thread; Qt queues them to the UI thread."""
 
@@ -99,9 +105,9 @@ class CalibrationWizard(QDialog):
     def _board_page(self) -> QWidget:
         page = QWidget()
         lay = QVBoxLayout(page)
-        lay.addWidget(QLabel(f"<b>1. Print the calibration board</b><br>{describe_board(self.session.board)}, on "
-                             "an A4 page in landscape. Print at 100 % (no fit-to-page), check the ruler measures "
-                             "100 mm, and glue or tape the sheet flat on something stiff."))
+        lay.addWidget(_wrapped(f"<b>1. Print the calibration board</b><br>{describe_board(self.session.board)}, "
+                               "on an A4 page in landscape. Print at 100 % (no fit-to-page), check the ruler "
+                               "measures 100 mm, and glue or tape the sheet flat on something stiff."))
         self.board_preview = QLabel()
         self.board_preview.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self.board_preview.setSizePolicy(QSizePolicy.Policy.Expanding, QSizePolicy.Policy.Expanding)
@@ -125,7 +131,7 @@ class CalibrationWizard(QDialog):
 
         from arapp.calibration_session import board_anchor
 
-        img, _ = sheet(board_anchor(self.session.board), dpi=60.0, page="A4")
+        img, _ = sheet(board_anchor(self.session.board), dpi=50.0, page="A4")
         self.board_preview.setPixmap(QPixmap.fromImage(bgr_to_qimage(img)))
 
     def choose_sheet_folder(self) -> None:
@@ -143,9 +149,9 @@ class CalibrationWizard(QDialog):
     def _collect_page(self) -> QWidget:
         page = QWidget()
         lay = QVBoxLayout(page)
-        lay.addWidget(QLabel("<b>2. Show the board to the camera</b><br>Hold it still at many places: near each "
-                             "edge and corner of the picture, close and far, facing the camera and tilted "
-                             "towards each side. Green squares show where views have reached."))
+        lay.addWidget(_wrapped("<b>2. Show the board to the camera</b><br>Hold it still at many places: near each "
+                               "edge and corner of the picture, close and far, facing the camera and tilted "
+                               "towards each side. Green squares show where views have reached."))
         self.view = QLabel("Press Start")
         self.view.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self.view.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Ignored)
@@ -266,6 +272,7 @@ class CalibrationWizard(QDialog):
         self.result_label = QLabel("")
         self.result_label.setWordWrap(True)
         self.result_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.result_label.setAlignment(Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
         lay.addWidget(self.result_label, 1)
         row = QHBoxLayout()
         self.cancel_solve_button = QPushButton("Cancel")

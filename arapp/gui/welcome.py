@@ -28,6 +28,16 @@ from PySide6.QtWidgets import (
 from arapp.guidance import lost_hint
 
 RECORDINGS_DIR = Path(__file__).resolve().parents[2] / "recordings"
+# what each bundled recording shows (tracking/synth/presets.py makes them)
+RECORDING_NOTES = {
+    "board_orbit": "a marker board seen from an orbit (the demo)",
+    "board_orbit_720p": "the same board at 1280x720",
+    "marker_occluded": "one marker covered by a hand, then out of view",
+    "qr_anchor": "a QR code as the anchor",
+    "fast_motion": "fast, blurred pans over the board",
+    "static_camera": "a camera on a tripod",
+    "printer_bed": "a marker on a printer bed (for the print preview)",
+}
 
 
 def bundled_recordings(folder: Path = RECORDINGS_DIR) -> list[tuple[str, str]]:
@@ -36,13 +46,17 @@ def bundled_recordings(folder: Path = RECORDINGS_DIR) -> list[tuple[str, str]]:
     if not folder.is_dir():
         return out
     for sub in sorted(p for p in folder.iterdir() if (p / "session.json").is_file()):
+        if sub.name.startswith("test_"):
+            continue  # recordings made for the test suite only
         try:
             session = json.loads((sub / "session.json").read_text())
         except (OSError, ValueError):
             continue
         cam = session.get("camera", {})
         kinds = ", ".join(sorted({a.get("kind", "?") for a in session.get("anchors", [])}))
-        out.append((str(sub), f"{sub.name}  ({cam.get('width', '?')}x{cam.get('height', '?')}, {kinds})"))
+        what = RECORDING_NOTES.get(sub.name, "")
+        out.append((str(sub), f"{sub.name}  ({cam.get('width', '?')}x{cam.get('height', '?')}, {kinds})"
+                              + (f": {what}" if what else "")))
     return out
 
 
