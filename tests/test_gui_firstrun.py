@@ -243,3 +243,21 @@ def test_first_hour_dialogs_fit_a_1366x768_screen(qtbot, config_dir):
         qtbot.addWidget(w)
         hint = w.minimumSizeHint()
         assert hint.width() <= 1280 and hint.height() <= 660, (type(w).__name__, hint)
+
+
+def test_calibration_banner_shows_only_for_the_estimated_camera(qtbot):
+    from tracking.camera import Camera
+    from tracking.default_intrinsics import estimated_camera
+
+    from arapp.gui.welcome import CalibrationBanner
+
+    banner = CalibrationBanner()
+    qtbot.addWidget(banner)
+    banner.set_camera(estimated_camera(1280, 720))
+    assert not banner.isHidden() and "approximate" in banner.label.text()
+    with qtbot.waitSignal(banner.calibrate_requested, timeout=1000):
+        banner.button.click()
+    banner.set_camera(Camera([[900.0, 0, 640], [0, 900.0, 360], [0, 0, 1]], None, 1280, 720))
+    assert banner.isHidden()
+    banner.set_camera(None)
+    assert banner.isHidden()

@@ -146,3 +146,31 @@ class LostHint(QLabel):
         if now - self._lost_since >= self.delay_s:
             self.setText(lost_hint(anchors, camera, estimated))
             self.show()
+
+
+class CalibrationBanner(QFrame):
+    """A strip over the view while the camera is the estimated one: "Uncalibrated (estimated) ..." and a
+    Calibrate button. `set_camera(camera)` shows or hides it (tracking.default_intrinsics.is_estimated)."""
+
+    calibrate_requested = Signal()
+
+    def __init__(self, parent=None):
+        from PySide6.QtWidgets import QHBoxLayout
+
+        super().__init__(parent)
+        self.setObjectName("calibration_banner")
+        self.setStyleSheet("#calibration_banner { background: #fff3cd; color: #5c4400; }")
+        lay = QHBoxLayout(self)
+        lay.setContentsMargins(8, 2, 8, 2)
+        self.label = QLabel("Uncalibrated camera (estimated): sizes are approximate; calibrate for accuracy")
+        self.label.setWordWrap(True)
+        self.button = QPushButton("Calibrate...")
+        self.button.clicked.connect(self.calibrate_requested)
+        lay.addWidget(self.label, 1)
+        lay.addWidget(self.button)
+        self.hide()
+
+    def set_camera(self, camera) -> None:
+        from tracking.default_intrinsics import is_estimated
+
+        self.setVisible(is_estimated(camera))
