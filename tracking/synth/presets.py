@@ -2,6 +2,12 @@
 
 Each preset is a scene dict in the JSON format of tracking.synth.scene.
 Regenerate all of them with `arapp synth all --out recordings --force`.
+
+TUNING presets are the recordings the tracker's parameters were chosen on; TEST presets (names
+starting with test_) were made later, from seeds never used for tuning, with webcam effects
+(sensor noise, auto-exposure, white-balance drift, rolling shutter, defocus, chroma subsampling,
+MJPEG rate control), and are only ever measured: no parameter is chosen by looking at them
+(recordings/README.md).
 """
 
 from __future__ import annotations
@@ -53,7 +59,7 @@ PRESETS: dict[str, dict] = {
             {"t": 7.0, "eye": [0.02, -0.32, 0.38], "target": [0.0, 0.0, 0.0]}],
             "shake": {"pos_mm": 1.5, "rot_deg": 0.25, "freq_hz": 1.5}},
         "effects": {"noise": 0.8, "occluder": {"start": 0.8, "end": 3.2, "ramp": 0.2, "anchor": 0}},
-        "video": {"fourcc": "MJPG", "quality": 80},
+        "video": {"fourcc": "MJPG", "quality": 70},
     },
     # A QR code as the world anchor, hand-held orbit.
     "qr_anchor": {
@@ -102,6 +108,79 @@ PRESETS: dict[str, dict] = {
         "video": {"fourcc": "MJPG", "quality": 85},
     },
 }
+
+
+# What a cheap USB webcam does (camera_effects.py): ~2000-4000 e- full well, rolling shutter read out in
+# ~20-30 ms, auto-exposure and auto white balance that drift, YUYV link, MJPEG at a varying quality.
+def _webcam(**kw) -> dict:
+    fx = {"sensor": {"full_well": 3000, "read_noise": 1.5}, "rolling_shutter": 0.025,
+          "auto_exposure": {"target": 115, "speed": 0.15, "initial_gain": 1.0},
+          "white_balance": {"amplitude": 0.04, "period": 3.5}, "defocus": 0.6, "vignette": 0.2,
+          "chroma_422": True, "jpeg_quality": [70, 90]}
+    fx.update(kw)
+    return fx
+
+
+TEST_PRESETS: dict[str, dict] = {
+    # A single 6 cm marker seen from ~0.45 m; a hand's fingertips slide onto its white border (one
+    # finger onto the black edge near a corner) from 0.6 s to 2.4 s and leave.
+    "test_hand_border": {
+        "name": "test_hand_border", "seed": 101, "fps": 30, "duration": 3.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 60, "dist": [-0.06, 0.03, 0.0003, -0.0004, 0.0]},
+        "anchors": [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 5, "length": 0.06}],
+        "desk": {"size": [1.4, 1.1], "ppm": 2000, "seed": 201},
+        "trajectory": {"kind": "orbit", "azimuth_start": -100, "azimuth_end": -85, "distance": 0.45,
+                       "elevation": 62, "shake": {"pos_mm": 1.5, "rot_deg": 0.25, "freq_hz": 1.5}},
+        "effects": _webcam(occluder={"start": 0.6, "end": 2.4, "ramp": 0.6, "style": "border", "approach_deg": 10,
+                                     "reach": 0.017, "offset": -0.012}),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
+    # A 5x4 GridBoard (36h12 dictionary, 3 cm markers) on a webcam: starts over-exposed (auto-exposure
+    # settles), focus hunts, white balance drifts, rolling shutter, noisy sensor.
+    "test_webcam_board": {
+        "name": "test_webcam_board", "seed": 102, "fps": 30, "duration": 3.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 66, "dist": [-0.1, 0.06, -0.0004, 0.0006, 0.0]},
+        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_ARUCO_MIP_36h12", "markers_x": 5, "markers_y": 4,
+                     "marker_length": 0.03, "separation": 0.006, "first_id": 0}],
+        "desk": {"size": [1.5, 1.2], "ppm": 2000, "seed": 202},
+        "trajectory": {"kind": "orbit", "azimuth_start": -65, "azimuth_end": -125, "distance": 0.5,
+                       "elevation": 57, "elevation_swing": 6, "shake": {"pos_mm": 2.0, "rot_deg": 0.3, "freq_hz": 2.0}},
+        "effects": _webcam(sensor={"full_well": 2000, "read_noise": 2.0}, rolling_shutter=0.03,
+                           auto_exposure={"target": 110, "speed": 0.12, "initial_gain": 1.7},
+                           defocus={"radius": 0.8, "swing": 0.6, "period": 1.9}),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
+    # A QR code on a webcam, hand-held orbit at ~0.4 m.
+    "test_qr_webcam": {
+        "name": "test_qr_webcam", "seed": 103, "fps": 30, "duration": 2.5,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": [-0.05, 0.02, 0.0, 0.0003, 0.0]},
+        "anchors": [{"kind": "qr", "text": "arapp test anchor 2", "length": 0.075}],
+        "desk": {"size": [1.4, 1.1], "ppm": 2000, "seed": 203},
+        "trajectory": {"kind": "orbit", "azimuth_start": -75, "azimuth_end": -110, "distance": 0.4,
+                       "elevation": 64, "shake": {"pos_mm": 2.0, "rot_deg": 0.35, "freq_hz": 2.2}},
+        "effects": _webcam(),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
+    # Fast pans over a GridBoard: motion blur along the true motion and rolling-shutter skew.
+    "test_fast_pan": {
+        "name": "test_fast_pan", "seed": 104, "fps": 30, "duration": 2.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": [-0.08, 0.04, 0.0005, -0.0005, 0.0]},
+        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
+                     "marker_length": 0.035, "separation": 0.008, "first_id": 10}],
+        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": 204},
+        "trajectory": {"kind": "pan", "azimuth": -95, "distance": 0.48, "elevation": 60, "pan_deg": 20,
+                       "cycles": 1.25, "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.5}},
+        "effects": _webcam(motion_blur=0.6, blur_samples=7, rolling_shutter=0.03),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
+}
+TUNING = list(PRESETS)
+TEST = list(TEST_PRESETS)
+PRESETS.update(TEST_PRESETS)
 
 
 def preset_names() -> list[str]:

@@ -13,9 +13,14 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+from scipy.spatial.transform import Rotation, Slerp
 
 from tracking.camera import Camera
 from tracking.poses import invert
+from tracking.synth.camera_effects import (AutoExposure, chroma_subsample_422, defocus, frame_jpeg_quality,
+                                           jpeg_roundtrip, luminance, row_times, sensor_noise, vignette_factor,
+                                           white_balance_gains)
+from tracking.synth.hand import hand_polygons, smooth_presence
 from tracking.synth.patterns import pattern_for
 from tracking.synth.scene import Scene
 from tracking.synth.texture import make_desk_texture
@@ -82,6 +87,9 @@ class DeskRenderer:
         self.centre = c
         self.pose_desk = make_trajectory(scene.trajectory, scene.duration, scene.seed)
         self.rng = np.random.default_rng(scene.seed + 101)
+        ae = scene.effects.get("auto_exposure")
+        self.ae = AutoExposure(**ae) if ae else None
+        self._next_index = 0
 
     # -- geometry ----------------------------------------------------------------
     def time_of(self, i: int) -> float:
@@ -95,17 +103,33 @@ class DeskRenderer:
 
     # -- rendering ---------------------------------------------------------------
     def render_clean(self, world_from_camera: np.ndarray) -> np.ndarray:
-        """Noise-free supersampled float32 BGR image of the desk and anchors from this pose."""
-        T = self.desk_from_world @ world_from_camera
-        R, c = T[:3, :3].astype(np.float32), T[:3, 3]
+        """Noise-free supersampled float32 BGR image of the desk and anchors from this pose.
+
+        `world_from_camera` is one 4x4 pose, or (H_ss, 4, 4): one pose per supersampled row (a rolling
+        shutter, see `row_poses`).
+        """
+        P = np.asarray(world_from_camera, np.float64)
+        if P.ndim == 2:
+            T = self.desk_from_world @ P
+            R, c = T[:3, :3].astype(np.float32), T[:3, 3].astype(np.float32)
+        else:
+            T = np.einsum("ij,rjk->rik", self.desk_from_world, P)
+            # per row: (H, 1) columns broadcast over the row's pixels
+            R = T[:, :3, :3].astype(np.float32)[:, :, :, None]
+            c = T[:, :3, 3].astype(np.float32)[:, :, None]
         rx, ry = self.rays[..., 0], self.rays[..., 1]
-        dz = R[2, 0] * rx + R[2, 1] * ry + R[2, 2]
+        dz = R[2, 0] * rx + R[2, 1] * ry + R[2, 2] if P.ndim == 2 else R[:, 2, 0] * rx + R[:, 2, 1] * ry + R[:, 2, 2]
+        cz = np.float32(-c[2]) if P.ndim == 2 else -c[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
-            s = np.float32(-c[2]) / dz
+            s = cz / dz
         valid = s > 0
         s = np.where(valid, s, np.float32(0))
-        x = np.float32(c[0]) + s * (R[0, 0] * rx + R[0, 1] * ry + R[0, 2])
-        y = np.float32(c[1]) + s * (R[1, 0] * rx + R[1, 1] * ry + R[1, 2])
+        if P.ndim == 2:
+            x = np.float32(c[0]) + s * (R[0, 0] * rx + R[0, 1] * ry + R[0, 2])
+            y = np.float32(c[1]) + s * (R[1, 0] * rx + R[1, 1] * ry + R[1, 2])
+        else:
+            x = c[:, 0] + s * (R[:, 0, 0] * rx + R[:, 0, 1] * ry + R[:, 0, 2])
+            y = c[:, 1] + s * (R[:, 1, 0] * rx + R[:, 1, 1] * ry + R[:, 1, 2])
         tex = self.texture
         u, v = tex.pixel_of(x, y)
         u = np.where(valid, u, -10).astype(np.float32)
@@ -150,8 +174,32 @@ class DeskRenderer:
         size = float(np.max(np.linalg.norm(px[:4] - px[4], axis=1)))
         return px[4], size
 
+    def row_poses(self, t: float) -> np.ndarray:
+        """world_from_camera at time t: one 4x4 pose for a global shutter, or (H_ss, 4, 4), one per
+        supersampled row, with effects.rolling_shutter = readout seconds (camera_effects.row_times;
+        the frame's ground truth is its centre row's pose)."""
+        readout = float(self.scene.effects.get("rolling_shutter") or 0.0)
+        if readout <= 0:
+            return self.world_from_camera(t)
+        times = row_times(t, self.rays.shape[0], readout)
+        # exact poses at 33 knots across the readout, interpolated between (slerp, lerp): over ~1 ms a
+        # hand-held trajectory is a straight line to far below a micrometre
+        knots = np.linspace(times[0], times[-1], 33)
+        P = np.array([self.world_from_camera(float(k)) for k in knots])
+        R = Slerp(knots, Rotation.from_matrix(P[:, :3, :3]))(times).as_matrix()
+        out = np.zeros((len(times), 4, 4))
+        out[:, :3, :3] = R
+        for j in range(3):
+            out[:, j, 3] = np.interp(times, knots, P[:, j, 3])
+        out[:, 3, 3] = 1.0
+        return out
+
     def render(self, i: int) -> tuple[np.ndarray, np.ndarray, float]:
-        """Frame i with all effects: (BGR uint8 image, world_from_camera, t seconds)."""
+        """Frame i with all effects: (BGR uint8 image, world_from_camera, t seconds).
+
+        Frames with auto-exposure are meant to be rendered in order (its gain depends on the frames
+        before); rendering another frame than the next one restarts the auto-exposure.
+        """
         sc, fx = self.scene, self.scene.effects
         t = self.time_of(i)
         pose = self.world_from_camera(t)
@@ -161,19 +209,26 @@ class DeskRenderer:
             offsets = (np.arange(n) + 0.5) / n - 0.5  # exposure centred on the frame time
             acc = None
             for o in offsets:
-                img = self.render_clean(self.world_from_camera(t + o * blur / sc.fps))
+                img = self.render_clean(self.row_poses(t + o * blur / sc.fps))
                 acc = img if acc is None else acc + img
             img = acc / n
         else:
-            img = self.render_clean(pose)
+            img = self.render_clean(self.row_poses(t))
         occ = fx.get("occluder")
         if occ and occ.get("start", 0) <= t <= occ.get("end", 0):
-            self._draw_hand(img, pose, t, occ)
+            if occ.get("style", "cover") == "border":
+                self._draw_border_hand(img, t, occ)
+            else:
+                self._draw_hand(img, pose, t, occ)
         img = cv2.resize(img, (sc.camera.width, sc.camera.height), interpolation=cv2.INTER_AREA)
+        if self.ae is not None and i != self._next_index:
+            self.ae.reset()
+        self._next_index = i + 1
         img = self._camera_response(img, t)
         return img, pose, t
 
     def _camera_response(self, img: np.ndarray, t: float) -> np.ndarray:
+        """Optics, exposure, sensor, white balance, quantisation, link and codec (camera_effects)."""
         fx = self.scene.effects
         gain = 1.0
         exp = fx.get("exposure")
@@ -182,24 +237,102 @@ class DeskRenderer:
         vig = float(fx.get("vignette") or 0.0)
         if vig:
             cam = self.scene.camera
-            yy, xx = np.mgrid[0:cam.height, 0:cam.width].astype(np.float32)
-            r2 = ((xx - cam.cx) ** 2 + (yy - cam.cy) ** 2) / (cam.cx ** 2 + cam.cy ** 2)
-            img = img * (1.0 - vig * r2)[..., None]
-        img = img * gain
+            img = img * vignette_factor(cam.width, cam.height, cam.cx, cam.cy, vig)[..., None]
+        ae_gain = 1.0
+        if self.ae is not None:
+            ae_gain = self.ae.gain
+            # the camera meters this frame (as exposed) and sets the next frame's gain
+            self.ae.update(luminance(img) * gain * ae_gain)
+        img = img * (gain * ae_gain)
         psf = float(fx.get("optics_blur") or 0.0)
         if psf > 0:
             img = cv2.GaussianBlur(img, (0, 0), psf)
+        dfc = fx.get("defocus")
+        if dfc:
+            img = defocus(img, self.defocus_radius(t))
         sigma = float(fx.get("noise") or 0.0)
         if sigma > 0:
             # Read noise plus shot noise growing with brightness (sigma given at mid-grey).
             std = sigma * np.sqrt(0.3 + 0.7 * np.clip(img, 0, 255) / 128.0)
             img = img + self.rng.standard_normal(img.shape).astype(np.float32) * std
+        sensor = fx.get("sensor")
+        if sensor:
+            img = sensor_noise(img, self.rng, float(sensor.get("full_well", 4000.0)),
+                               float(sensor.get("read_noise", 1.5)), gain=gain * ae_gain)
+        wb = fx.get("white_balance")
+        if wb:
+            img = img * white_balance_gains(t, float(wb.get("amplitude", 0.05)), float(wb.get("period", 3.0)),
+                                            float(wb.get("phase", 0.0)))
         out = np.clip(np.rint(img), 0, 255).astype(np.uint8)
-        q = fx.get("jpeg_quality")
+        if fx.get("chroma_422"):
+            out = chroma_subsample_422(out)
+        q = frame_jpeg_quality(fx.get("jpeg_quality"), self.rng)
         if q:
-            ok, buf = cv2.imencode(".jpg", out, [cv2.IMWRITE_JPEG_QUALITY, int(q)])
-            out = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+            out = jpeg_roundtrip(out, q)
         return out
+
+    def defocus_radius(self, t: float) -> float:
+        """Pillbox radius (output pixels) at time t: effects.defocus = radius, or {"radius", "swing",
+        "period"} for a lens hunting focus (radius + swing * sin(2 pi t / period), never below 0)."""
+        d = self.scene.effects.get("defocus")
+        if not d:
+            return 0.0
+        if isinstance(d, (int, float)):
+            return float(d)
+        r = float(d.get("radius", 1.0)) + float(d.get("swing", 0.0)) * np.sin(2 * np.pi * t / float(d.get("period", 2.0)))
+        return max(0.0, float(r))
+
+    def hand_pixels(self, t: float, occ: dict) -> list[np.ndarray]:
+        """Projected outlines (supersampled pixels, each (N, 2)) of the border hand at time t (hand.py)."""
+        a = self.scene.anchors[int(occ.get("anchor", 0))]
+        pat, _ = self.patterns[int(occ.get("anchor", 0))]
+        w, h = pat.extent
+        m = pat.margin
+        paper = np.array([[pat.origin[0] + p * pat.sx, pat.origin[1] + q * pat.sy]
+                          for p, q in ((-m, -m), (w + m, -m), (w + m, h + m), (-m, h + m))])
+        k = smooth_presence(t, float(occ.get("start", 0)), float(occ.get("end", 0)), float(occ.get("ramp", 0.4)))
+        polys = hand_polygons(paper, float(occ.get("approach_deg", -60.0)), float(occ.get("reach", m)), k,
+                              offset=float(occ.get("offset", 0.0)))
+        poses = self.row_poses(t)
+        out = []
+        for poly in polys:
+            local = poly.copy()
+            local[:, 2] *= pat.normal_sign  # heights above the paper, toward the camera
+            world = (a.world_from_anchor @ np.column_stack([local, np.ones(len(local))]).T).T[:, :3]
+            if poses.ndim == 2:
+                out.append(self.camera_ss.project_world(world, poses))
+                continue
+            # rolling shutter: each point seen at the time of the row it falls on (two fixed-point steps)
+            rows = self.camera_ss.project_world(world, poses[len(poses) // 2])[:, 1]
+            for _ in range(2):
+                r = np.clip(np.rint(rows).astype(int), 0, len(poses) - 1)
+                px = np.array([self.camera_ss.project_world(world[j], poses[r[j]]) for j in range(len(world))])
+                rows = px[:, 1]
+            out.append(px)
+        return out
+
+    def _draw_border_hand(self, img: np.ndarray, t: float, occ: dict) -> None:
+        """A skin-coloured hand with rounded fingers whose fingertips slide onto an anchor's white
+        border and off again (occluder style "border"), with a soft shadow on the desk."""
+        polys = self.hand_pixels(t, occ)
+        H, W = img.shape[:2]
+        mask = np.zeros((H, W), np.uint8)
+        for p in polys:
+            if np.all(np.isfinite(p)):
+                cv2.fillPoly(mask, [np.round(p * 16).astype(np.int32)], 255, cv2.LINE_AA, shift=4)
+        if not mask.any():
+            return
+        s = self.scene.supersample
+        # shadow: the hand's silhouette, shifted and blurred (a lamp above and behind the camera)
+        shadow = cv2.GaussianBlur(np.roll(mask, (int(6 * s), int(4 * s)), axis=(0, 1)).astype(np.float32) / 255.0,
+                                  (0, 0), 4.0 * s)
+        img *= (1.0 - 0.35 * shadow)[..., None]
+        alpha = (mask.astype(np.float32) / 255.0)[..., None]
+        # skin: darker toward the silhouette's edge, as light falls off round a finger
+        dist = cv2.distanceTransform((mask > 127).astype(np.uint8), cv2.DIST_L2, 3)
+        shade = 0.72 + 0.28 * np.clip(dist / (5.0 * s), 0.0, 1.0)
+        img *= 1.0 - alpha
+        img += alpha * (SKIN_BGR * shade[..., None])
 
     def _draw_hand(self, img: np.ndarray, pose: np.ndarray, t: float, occ: dict) -> None:
         """A skin-coloured hand with fingers and forearm, sliding in over an anchor, in front of the desk."""

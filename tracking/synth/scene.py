@@ -11,7 +11,10 @@ Scene JSON (all keys but `anchors` and `trajectory` optional; metres, seconds, d
      "effects": {"noise": 2.0, "motion_blur": 0.0, "blur_samples": 7,
                  "exposure": {"amplitude": 0.2, "period": 2.0},
                  "jpeg_quality": null, "vignette": 0.15, "optics_blur": 0.5,
-                 "occluder": {"start": 1.0, "end": 3.0, "anchor": 0}},
+                 "occluder": {"start": 1.0, "end": 3.0, "anchor": 0},
+                 "rolling_shutter": 0.02, "defocus": 0.8, "auto_exposure": {"target": 110, "speed": 0.2},
+                 "white_balance": {"amplitude": 0.04, "period": 3.0}, "sensor": {"full_well": 3000, "read_noise": 1.5},
+                 "chroma_422": true},
      "video": {"fourcc": "MJPG", "quality": 90},
      "supersample": 3}
 
@@ -37,14 +40,21 @@ from tracking.session import AnchorSpec, parse_anchors
 from tracking.synth.patterns import pattern_for
 
 DEFAULT_EFFECTS = {
-    "noise": 0.0,  # sensor noise standard deviation at mid-grey, 8-bit levels
+    "noise": 0.0,  # sensor noise standard deviation at mid-grey, 8-bit levels (simple model; see "sensor")
     "motion_blur": 0.0,  # exposure time as a fraction of the frame interval (0 = sharp)
     "blur_samples": 7,  # sub-frame renders averaged for motion blur
     "exposure": None,  # {"amplitude": a, "period": s}: gain 1 + a*sin(2 pi t / period)
-    "jpeg_quality": None,  # extra JPEG round trip at this quality (compression artefacts)
-    "vignette": 0.0,
-    "optics_blur": 0.5,  # lens point-spread, Gaussian sigma in output pixels (symmetric: ground truth unmoved)  # brightness fall-off at the image corners (0..1)
-    "occluder": None,  # {"start": s, "end": s, "anchor": i}: a hand over that anchor
+    "jpeg_quality": None,  # extra JPEG round trip at this quality, or [low, high] drawn per frame
+    "vignette": 0.0,  # brightness fall-off at the image corners (0..1)
+    "optics_blur": 0.5,  # lens point-spread, Gaussian sigma in output pixels (symmetric: ground truth unmoved)
+    "occluder": None,  # {"start": s, "end": s, "anchor": i, "ramp": s}: a hand over that anchor; with
+    #                    "style": "border", "approach_deg", "reach" (m), "offset" (m): fingertips onto its border
+    "rolling_shutter": 0.0,  # readout time top to bottom row, seconds (0 = global shutter)
+    "defocus": 0.0,  # pillbox radius in output pixels, or {"radius", "swing", "period"} (focus hunting)
+    "auto_exposure": None,  # {"target": luma, "speed": 0..1, "initial_gain": g, "min_gain", "max_gain"}
+    "white_balance": None,  # {"amplitude": a, "period": s, "phase": rad}: drifting B/R gains
+    "sensor": None,  # {"full_well": electrons at level 255, "read_noise": levels}: shot + read noise
+    "chroma_422": False,  # YUYV 4:2:2 link: pixel pairs share chroma
 }
 
 
@@ -172,6 +182,7 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
         if k not in DEFAULT_EFFECTS:
             raise SessionError(f"{where}.effects.{k}: unknown effect (known: {', '.join(DEFAULT_EFFECTS)})")
         effects[k] = v
+    _check_effects(effects, f"{where}.effects")
     video = data.get("video", {})
     ss = data.get("supersample", 3)
     if not isinstance(ss, int) or not 1 <= ss <= 8:
@@ -192,6 +203,35 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
 
     make_trajectory(scene.trajectory, scene.duration, scene.seed, f"{where}.trajectory")  # validate now
     return scene
+
+
+_EFFECT_KEYS = {"auto_exposure": {"target", "speed", "initial_gain", "min_gain", "max_gain"},
+                "white_balance": {"amplitude", "period", "phase"}, "sensor": {"full_well", "read_noise"},
+                "defocus": {"radius", "swing", "period"},
+                "occluder": {"start", "end", "anchor", "ramp", "style", "approach_deg", "reach", "offset"}}
+
+
+def _check_effects(fx: dict, where: str) -> None:
+    """Camera-effect blocks: known keys only, numbers where numbers belong."""
+    for k, keys in _EFFECT_KEYS.items():
+        v = fx.get(k)
+        if not v or (k == "defocus" and isinstance(v, (int, float))):
+            continue
+        if not isinstance(v, dict):
+            raise SessionError(f"{where}.{k}: must be an object with keys {', '.join(sorted(keys))}")
+        for kk, vv in v.items():
+            if kk not in keys:
+                raise SessionError(f"{where}.{k}.{kk}: unknown key (known: {', '.join(sorted(keys))})")
+            if kk != "style" and (not isinstance(vv, (int, float)) or isinstance(vv, bool)):
+                raise SessionError(f"{where}.{k}.{kk}: must be a number, got {vv!r}")
+    occ = fx.get("occluder")
+    if occ and occ.get("style", "cover") not in ("cover", "border"):
+        raise SessionError(f"{where}.occluder.style: must be 'cover' or 'border', got {occ.get('style')!r}")
+    rs = fx.get("rolling_shutter") or 0.0
+    if not isinstance(rs, (int, float)) or isinstance(rs, bool) or rs < 0:
+        raise SessionError(f"{where}.rolling_shutter: must be a readout time in seconds >= 0, got {rs!r}")
+    if (fx.get("sensor") or {}).get("full_well", 1) <= 0:
+        raise SessionError(f"{where}.sensor.full_well: must be a positive number of electrons")
 
 
 def _check_on_desk(anchor: AnchorSpec, world_normal_sign: float, where: str) -> None:
