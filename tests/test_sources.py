@@ -262,10 +262,10 @@ class FakeCapture:
 def test_v4l2_reports_granted_mode_and_a_vanishing_camera(monkeypatch, tmp_path):
     import tracking.sources as sources
 
-    real_exists = sources.os.path.exists
-    monkeypatch.setattr(sources.os.path, "exists", lambda p: p == "/dev/video7" or real_exists(p))
-    monkeypatch.setattr(sources.os, "access", lambda p, mode: True)
-    monkeypatch.setattr(sources.cv2, "VideoCapture", FakeCapture)
+    real_exists = sources.v4l2.os.path.exists
+    monkeypatch.setattr(sources.v4l2.os.path, "exists", lambda p: p == "/dev/video7" or real_exists(p))
+    monkeypatch.setattr(sources.v4l2.os, "access", lambda p, mode: True)
+    monkeypatch.setattr(sources.v4l2.cv2, "VideoCapture", FakeCapture)
     CAM.save_yaml(tmp_path / "cam.yaml")  # 160x120 calibration, scaled to the granted 320x240
     with open_source("v4l2:7", width=1920, height=1080, fps=60, calibration=tmp_path / "cam.yaml") as src:
         assert src.granted == {"width": 320, "height": 240, "fps": 25.0, "fourcc": "MJPG"}
@@ -381,3 +381,114 @@ def test_depthai_source_reads_the_device_calibration(monkeypatch):
     assert ("intrinsics", "CAM_A", 1280, 720) in calls and calls[-2:] == ["stop", "close"]
     assert [f.index for f in frames] == [0, 1, 3]  # the gap shows the dropped frame
     np.testing.assert_allclose([f.t for f in frames], [0, 1 / 30, 3 / 30], atol=2e-6)  # timedelta: 1 us
+
+
+# -- the spec registry ------------------------------------------------------------------------------------
+
+def test_parse_spec_table(tmp_path):
+    from tracking.sources import SourceSpec, parse_spec
+
+    folder = make_recording(tmp_path / "my rec", n=3)
+    video = tmp_path / "clip.mp4"
+    video.write_bytes(b"x")
+    # spec -> (scheme, target, calibration, live, display name); written out here, not derived from the parser
+    table = {
+        "v4l2:0": ("v4l2", "0", None, True, "v4l2:0"),
+        "v4l2:/dev/video2": ("v4l2", "/dev/video2", None, True, "v4l2:/dev/video2"),
+        "depthai": ("depthai", "", None, True, "depthai"),
+        "depthai:14442C10": ("depthai", "14442C10", None, True, "depthai:14442C10"),
+        str(folder): ("file", str(folder), None, False, "my rec"),
+        f"file:{folder}": ("file", str(folder), None, False, "my rec"),
+        f"file:{folder}/session.json": ("file", f"{folder}/session.json", None, False, "my rec"),
+        f"file:{video}?calibration=cam.yaml": ("file", str(video), "cam.yaml", False, "clip.mp4"),
+        f"v4l2:1?calibration={tmp_path}/c.yaml": ("v4l2", "1", f"{tmp_path}/c.yaml", True, "v4l2:1"),
+    }
+    for text, (scheme, target, calib, live, name) in table.items():
+        spec = parse_spec(text)
+        assert (spec.scheme, spec.target, spec.calibration, spec.live, spec.display_name) == \
+            (scheme, target, calib, live, name), text
+        assert parse_spec(spec.text) == spec  # written back, read again: the same spec
+    assert parse_spec(str(folder)).recording_folder == folder
+    assert parse_spec(f"file:{video}").recording_folder is None
+    assert parse_spec("v4l2:0").recording_folder is None
+    assert isinstance(parse_spec(parse_spec("v4l2:0")), SourceSpec)
+    for bad, message in [("rtsp://cam/stream", "unknown source kind 'rtsp'"), ("v4l2:", "v4l2 needs a device"),
+                         ("file:x.mp4?fps=3", "unknown option 'fps'"), ("file:x.mp4?calibration=", "is empty"),
+                         ("", "empty source")]:
+        with pytest.raises(SourceError, match=message):
+            parse_spec(bad)
+
+
+def test_live_and_seekable_are_attributes_of_the_source(rec, tmp_path):
+    from tracking.sources import DepthAISource
+
+    assert (RecordingSource.live, RecordingSource.seekable) == (False, True)
+    assert (VideoFileSource.live, V4L2Source.live, DepthAISource.live) == (False, True, True)
+    with open_source(str(rec)) as src:
+        assert not src.live and src.seekable
+
+
+def test_a_new_scheme_is_one_registry_row(monkeypatch, rec):
+    """A camera source added the documented way: a Source subclass and one Scheme row; the parser,
+    open_source, `live` and the device list then know it, with no other change."""
+    import tracking.sources.registry as registry
+    from tracking.sources import Source, list_devices, parse_spec
+
+    class PatternSource(Source):
+        kind = "pattern"
+        live = True
+
+        def __init__(self, target):
+            super().__init__()
+            self.target = target
+            self._camera = CAM
+
+        def _frames(self):
+            for i in range(3):
+                yield Frame(i, i / 30, frame_image(i))
+
+    row = registry.Scheme("pattern", lambda target, options: PatternSource(target), PatternSource.live,
+                          "'pattern:NAME'", devices=lambda: [("pattern:bars", "test bars")])
+    monkeypatch.setitem(registry.SCHEMES, "pattern", row)
+    assert parse_spec("pattern:bars").live and parse_spec("pattern:bars").target == "bars"
+    with open_source("pattern:bars") as src:
+        assert isinstance(src, PatternSource) and src.target == "bars" and len(list(src)) == 3
+    assert ("pattern:bars", "test bars") in list_devices()
+    assert "'pattern:NAME'" in registry.spec_help()
+
+
+# -- frames.csv against the video -------------------------------------------------------------------------
+
+def _cut_frames_csv(src_folder: Path, dst: Path, keep: int) -> Path:
+    shutil.copytree(src_folder, dst)
+    lines = (dst / "frames.csv").read_text().splitlines()
+    (dst / "frames.csv").write_text("\n".join(lines[:1 + keep]) + "\n")
+    return dst
+
+
+def test_frames_csv_shorter_than_the_video_is_warned_with_the_file_named(rec_mjpg, tmp_path):
+    """Policy (tracking.sources.recording.check_frames_csv): warn and replay the frames frames.csv lists;
+    the warning names frames.csv, both counts and the frames left out; the source's `error` says it at the end."""
+    n = len(TIMES)
+    short = _cut_frames_csv(rec_mjpg, tmp_path / "short", 12)
+    with pytest.warns(SourceWarning) as record:
+        src = RecordingSource(short)
+    message = str(record[0].message)
+    assert str(short / "frames.csv") in message and f"lists 12 frames but video.avi has {n}" in message
+    assert f"frames 12..{n - 1}" in message
+    with src:
+        frames = list(src)
+    assert [f.index for f in frames] == list(range(12)) and src.error == message
+    # One row per video frame: nothing to say.
+    with RecordingSource(rec_mjpg) as full:
+        assert full.notice is None and len(list(full)) == n and full.error is None
+
+
+def test_arapp_replay_reports_a_short_frames_csv(rec_mjpg, tmp_path, capsys):
+    from arapp.cli import main
+
+    short = _cut_frames_csv(rec_mjpg, tmp_path / "short", 12)
+    with pytest.warns(SourceWarning):
+        rc = main(["replay", str(short), "--out", str(tmp_path / "out"), "--no-video", "--no-slam"])
+    out = capsys.readouterr().out
+    assert rc == 0 and "frames.csv: lists 12 frames" in out

@@ -1,0 +1,142 @@
+"""The source interface: `Source` (an iterable of `Frame`s with a camera), `SourceWarning`, and the
+OpenCV capture helpers the file-based sources share.
+
+A source class says what it is with class attributes: `scheme` (the spec prefix that opens it, see
+tracking.sources.registry), `kind` (the session.json `source.kind`), `live` (frames arrive in real
+time from a device: the GUI shows the newest, never paces or seeks) and `seekable` (`seek()` works).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+
+from tracking.camera import Camera
+from tracking.errors import CalibrationError, SourceError
+
+
+class SourceWarning(RuntimeWarning):
+    """A source ended early (truncated video, camera unplugged); the message says where and why."""
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One frame: `index` (0-based position in the source), `t` (seconds from the source's first
+    frame; recording time for recordings, capture time for cameras), `image` (BGR uint8, HxWx3)."""
+
+    index: int
+    t: float
+    image: np.ndarray
+
+
+class Source:
+    """Base of all sources. Subclasses implement `_frames()` and `_release()`, set `kind`, `live` and
+    `seekable`, and are opened through a scheme registered in tracking.sources.registry."""
+
+    kind = "file"
+    live = False      # frames come from a device as they happen: show the newest, never pace or seek
+    seekable = False  # seek(frame=) / seek(t=) work
+
+    def __init__(self):
+        self.error: str | None = None  # set when the stream ended early because something failed
+        self.info: dict = {"kind": self.kind}  # the session.json `source` block for recordings of this source
+        self._camera: Camera | None = None
+        self.fps: float = 30.0
+        self.closed = False
+
+    @property
+    def camera(self) -> Camera:
+        if self._camera is None:
+            raise SourceError(self._no_camera_message())
+        return self._camera
+
+    @property
+    def has_camera(self) -> bool:
+        return self._camera is not None
+
+    def _no_camera_message(self) -> str:
+        return f"{self.describe()} has no calibration; pass --calibration cam.yaml (OpenCV FileStorage YAML)"
+
+    def describe(self) -> str:
+        return self.kind
+
+    def _fail(self, message: str) -> None:
+        """End the stream with an error the caller can show (no exception from inside iteration)."""
+        self.error = message
+        warnings.warn(message, SourceWarning, stacklevel=3)
+
+    def __iter__(self) -> Iterator[Frame]:
+        if self.closed:
+            raise SourceError(f"{self.describe()}: source is closed")
+        return self._frames()
+
+    def _frames(self) -> Iterator[Frame]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _release(self) -> None:
+        pass
+
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            self._release()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+    def __del__(self):
+        try:
+            self.close()
+        except Exception:  # noqa: BLE001 - never raise from a finaliser
+            pass
+
+
+def _open_capture(path: Path) -> cv2.VideoCapture:
+    if not path.is_file():
+        raise SourceError(f"{path}: video file does not exist")
+    if path.stat().st_size == 0:
+        raise SourceError(f"{path}: video file is empty")
+    cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    if not cap.isOpened():
+        cap = cv2.VideoCapture(str(path))
+    if not cap.isOpened():
+        raise SourceError(f"{path}: OpenCV cannot open this video (corrupt file or unsupported container/codec)")
+    return cap
+
+
+def _probe_first_frame(cap: cv2.VideoCapture, path: Path) -> np.ndarray:
+    ok, img = cap.read()
+    if not ok or img is None:
+        cap.release()
+        raise SourceError(f"{path}: the video opens but no frame can be decoded (corrupt or truncated file)")
+    return img
+
+
+def _as_bgr(img: np.ndarray) -> np.ndarray:
+    if img.ndim == 2:
+        return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+    if img.shape[2] == 4:
+        return cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    return img
+
+
+def _fit_camera(cam: Camera, width: int, height: int, calib_name: str, what: str) -> Camera:
+    """The calibration at the stream's size: scaled when the aspect matches, else an error."""
+    if (cam.width, cam.height) == (width, height):
+        return cam
+    if abs(cam.width / cam.height - width / height) > 1e-3:
+        raise CalibrationError(
+            f"{calib_name} is for {cam.width}x{cam.height} but {what} delivers {width}x{height} "
+            "(another aspect ratio); calibrate at this size"
+        )
+    return cam.scaled(width, height)
+

@@ -1,0 +1,54 @@
+"""Plain video files (spec `file:VIDEO` or a path to a video): frames at frame / fps seconds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+
+from tracking.camera import Camera
+
+from .base import Frame, Source, _as_bgr, _fit_camera, _open_capture, _probe_first_frame
+
+
+class VideoFileSource(Source):
+    """A plain video file; timestamps frame / fps. With `calibration` (OpenCV YAML) it has a camera
+    (scaled to the video size if the calibration was made at another size of the same aspect)."""
+
+    kind = "file"
+
+    def __init__(self, path: str | Path, calibration: str | Path | Camera | None = None, fps: float | None = None):
+        super().__init__()
+        self.path = Path(path)
+        self._cap = _open_capture(self.path)
+        first = _probe_first_frame(self._cap, self.path)
+        self.height, self.width = first.shape[:2]
+        self._cap.set(cv2.CAP_PROP_POS_FRAMES, 0)
+        probed = self._cap.get(cv2.CAP_PROP_FPS)
+        self.fps = float(fps or (probed if probed and 0 < probed < 1000 else 30.0))
+        n = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        self.frame_count = n if n > 0 else None
+        if calibration is not None:
+            cam = calibration if isinstance(calibration, Camera) else Camera.load_yaml(calibration)
+            self._camera = _fit_camera(cam, self.width, self.height, str(calibration), str(self.path))
+        self.info = {"kind": "file", "path": str(self.path)}
+
+    def describe(self) -> str:
+        return f"video {self.path}"
+
+    def _frames(self) -> Iterator[Frame]:
+        i = 0
+        while not self.closed:
+            ok, img = self._cap.read()
+            if not ok or img is None:
+                if self.frame_count and i < self.frame_count:
+                    self._fail(f"{self.path}: decoding stopped at frame {i} of {self.frame_count} "
+                               f"(truncated or corrupt file); frames 0..{i - 1} were delivered")
+                return
+            yield Frame(i, i / self.fps, _as_bgr(img))
+            i += 1
+
+    def _release(self) -> None:
+        self._cap.release()
+
