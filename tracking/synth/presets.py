@@ -59,7 +59,7 @@ PRESETS: dict[str, dict] = {
             {"t": 7.0, "eye": [0.02, -0.32, 0.38], "target": [0.0, 0.0, 0.0]}],
             "shake": {"pos_mm": 1.5, "rot_deg": 0.25, "freq_hz": 1.5}},
         "effects": {"noise": 0.8, "occluder": {"start": 0.8, "end": 3.2, "ramp": 0.2, "anchor": 0}},
-        "video": {"fourcc": "MJPG", "quality": 70},
+        "video": {"fourcc": "MJPG", "quality": 80},
     },
     # A QR code as the world anchor, hand-held orbit.
     "qr_anchor": {
