@@ -19,7 +19,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from tracking.camera import Camera
-from tracking.default_intrinsics import attach_estimated_camera, is_estimated, source_size
+from tracking.default_intrinsics import DEFAULT_HFOV_DEG, attach_estimated_camera, is_estimated, source_size
 from tracking.errors import CalibrationError
 
 from arapp.user_config import config_dir, slug
@@ -83,17 +83,24 @@ def stored_camera(name: str, width: int, height: int) -> tuple[Camera, Path] | N
 
 def attach_camera(source) -> str:
     """Give a just-opened source its camera (see the module doc); returns OWN, STORED or ESTIMATED.
-    Sets `source.calibration_file` to the stored file used, when one was."""
+    Sets `source.calibration_file` to the stored file used, when one was, and notes where the camera came
+    from in `source.info["calibration"]` (the session.json `source` block of a recording made from it, so
+    a recording never passes an estimate off as a calibration)."""
     if source.has_camera and not getattr(source, "camera_estimated", False):
         return OWN
+    info = getattr(source, "info", None)
+    note = info.__setitem__ if isinstance(info, dict) else (lambda _k, _v: None)
     size = source_size(source)
     if size is not None:
         found = stored_camera(camera_name(source), *size)
         if found is not None:
             source._camera, source.calibration_file = found
             source.camera_estimated = False
+            note("calibration", f"stored {found[1].name}")
             return STORED
     if attach_estimated_camera(source) or getattr(source, "camera_estimated", False):
+        note("calibration", f"estimated: pinhole, {DEFAULT_HFOV_DEG:g} deg horizontal field of view, "
+                            "no distortion")
         return ESTIMATED
     return OWN
 

@@ -86,6 +86,7 @@ def test_video_without_calibration_gets_the_estimated_camera(plain_video, config
     assert camera_store.attach_camera(src) == camera_store.ESTIMATED
     assert np.allclose(src.camera.K, estimated_camera(320, 240).K)
     assert camera_store.calibration_kind(src.camera) == camera_store.ESTIMATED
+    assert src.info["calibration"].startswith("estimated")  # what a recording made from it will say
     src.close()
 
 
