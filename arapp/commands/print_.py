@@ -27,6 +27,8 @@ def add_arguments(parser):
     parser.add_argument("--printer", default=None, metavar="PROFILE",
                         help="printer profile JSON (arapp-printer/1) or shipped name")
     parser.add_argument("--resume", metavar="JOB.json", help="continue a print whose link dropped (serial only)")
+    parser.add_argument("--after-halt", action="store_true",
+                        help="resume a job during which the printer halted (read why first: arapp says it)")
     parser.add_argument("--job", metavar="JOB.json",
                         help="where to keep the job state for --resume (default: next to the G-code)")
     parser.add_argument("-o", "--output", metavar="GCODE",
@@ -119,34 +121,59 @@ def _progress_writer(stream):
 
 
 def _run_job(link, job_fn):
-    """Run the job on a worker thread; Ctrl-C cancels the print cleanly."""
+    """Run the job on a worker thread; Ctrl-C cancels the print and waits for the cancel to end.
+
+    Returns (final state, interrupted). The worker's exception (a LinkError) is raised here.
+    """
     box = {}
+    finished = threading.Event()
 
     def work():
         try:
             box["state"] = job_fn()
-        except BaseException as exc:  # handed to the main thread, re-raised there
+        except BaseException as exc:  # noqa: BLE001 - handed to the main thread, raised there
             box["error"] = exc
+        finally:
+            finished.set()
 
-    t = threading.Thread(target=work, name="arapp-print", daemon=True)
-    t.start()
+    threading.Thread(target=work, name="arapp-print", daemon=True).start()
     interrupted = False
-    while t.is_alive():
+    while not finished.is_set():
         try:
-            t.join()
+            finished.wait()
         except KeyboardInterrupt:
-            if interrupted:
-                raise
+            # An Event wait survives an interrupt (a Thread.join interrupted may report the thread
+            # ended while it still runs); the print ends through the link's cancel, heaters off.
+            if not interrupted:
+                print("\ncancelling the print: heaters off, nozzle up (waiting for the printer)", file=sys.stderr)
             interrupted = True
-            print("\ncancelling the print (Ctrl-C again to quit at once)", file=sys.stderr)
             link.cancel()
     if "error" in box:
         raise box["error"]
     return box["state"], interrupted
 
 
+def _check_job_file(job_path: Path, state) -> None:
+    """Refuse the print before it starts when the job file cannot be written (one line)."""
+    from arapp.printing.link.job import JobState
+
+    probe = state or JobState()
+    existed = job_path.exists()
+    try:
+        if existed:
+            with open(job_path, "a", encoding="utf-8"):
+                pass
+        else:
+            probe.save(job_path)
+            job_path.unlink()
+    except OSError as exc:
+        raise OSError(f"cannot write the job file {job_path}: {exc.strerror or exc}; "
+                      "nothing was sent: choose a writable place with --job") from exc
+
+
 def run(args) -> int:
-    from arapp.printing.link.job import JobState, Program, resume_commands
+    from arapp.printing.link.factory import OctoPrintTarget, SerialTarget, make_link
+    from arapp.printing.link.job import JobState, Program, check_resumable, resume_commands
 
     if args.save_key:
         from arapp.printing.link.octoprint import save_api_key
@@ -159,12 +186,26 @@ def run(args) -> int:
             return 0
     if args.port and args.octoprint:
         raise ValueError("give either --port (USB serial) or --octoprint URL, not both")
+    if args.window < 1:
+        raise ValueError(f"--window must be at least 1 line, got {args.window}")
+    if not (0 < args.timeout < 86400):
+        raise ValueError(f"--timeout must be between 0 and 86400 seconds, got {args.timeout}")
+
+    profile = None
+    if args.printer is not None or args.resume or (not args.octoprint and not args.port) or (
+            args.input and Path(args.input).suffix.lower() not in GCODE_SUFFIXES):
+        from arapp.printing import load_profile
+
+        profile = load_profile(args.printer)
 
     state = None
     if args.resume:
         if args.octoprint:
             raise ValueError("--resume works with the serial link (--port) only")
-        state = JobState.load(args.resume)
+        state = JobState.load(args.resume, profile)
+        check_resumable(state, args.resume, after_halt=args.after_halt)
+        if state.status == "halted":
+            print(f"resuming after a printer halt: {state.message}", file=sys.stderr)
         gcode_path = Path(args.input or state.gcode)
         args.job = args.job or args.resume
     elif args.input is None:
@@ -172,13 +213,6 @@ def run(args) -> int:
     else:
         gcode_path = Path(args.input)
 
-    profile = None
-    needs_profile = (args.printer is not None or not args.octoprint and not args.port
-                     or gcode_path.suffix.lower() not in GCODE_SUFFIXES)
-    if needs_profile:
-        from arapp.printing import load_profile
-
-        profile = load_profile(args.printer)
     if gcode_path.suffix.lower() not in GCODE_SUFFIXES:
         gcode_path = _slice_model(args, profile)
     if not gcode_path.is_file():
@@ -186,44 +220,36 @@ def run(args) -> int:
     lines = gcode_path.read_text(encoding="utf-8", errors="replace").splitlines()
     program = Program.from_lines(lines)
     job_path = Path(args.job) if args.job else gcode_path.with_name(gcode_path.name + ".job.json")
+    _check_job_file(job_path, state)
     show = _progress_writer(sys.stderr)
 
     if args.octoprint:
-        from arapp.printing.link.octoprint import OctoPrintLink, load_api_key
-
-        if not args.api_key_file:
-            raise ValueError("--octoprint needs --api-key-file F (or --save-key F to store a key first)")
-        link = OctoPrintLink(args.octoprint, load_api_key(args.api_key_file), job_path=job_path)
+        link = make_link(OctoPrintTarget(args.octoprint, args.api_key_file), profile=profile, job_path=job_path)
         link.connect()
         print(f"connected to {link.version or 'OctoPrint'} at {link.url}", file=sys.stderr)
-        try:
-            final, interrupted = _run_job(link, lambda: link.print_gcode(lines, progress=show,
-                                                                           gcode_path=str(gcode_path)))
-        finally:
-            link.close()
+        job = lambda: link.print_gcode(lines, progress=show, gcode_path=str(gcode_path))  # noqa: E731
     else:
-        from arapp.printing.link.serial_link import SerialPrinter
-
         port = args.port or (profile.link.port if profile is not None else None)
         baud = args.baud or (profile.link.baud if profile is not None else 115200)
-        if not port:
-            raise ValueError("no serial port: give --port DEV or set link.port in the printer profile")
-        bed_height = profile.bed.height if profile is not None else None
-        link = SerialPrinter(port, baud, window=args.window, timeout=args.timeout,
-                             job_path=job_path, bed_height=bed_height)
+        link = make_link(SerialTarget(port or "", baud, args.window, args.timeout), profile=profile,
+                         job_path=job_path)
         preamble = []
         if state is not None:
             state.check_program(program, gcode_path)
+            bed_height = profile.bed.height if profile is not None else None
             preamble = resume_commands(state, bed_height=bed_height)
             print(f"resuming {gcode_path} at line {state.next_line + 1} (layer {state.layer})", file=sys.stderr)
         link.connect()
         print(f"connected to {link.firmware or 'printer'} on {port}", file=sys.stderr)
-        try:
-            final, interrupted = _run_job(link, lambda: link.print_gcode(
-                lines, progress=show, program=program, state=state, preamble=preamble,
-                gcode_path=str(gcode_path.resolve())))
-        finally:
-            link.close()
+        job = lambda: link.print_gcode(lines, progress=show, gcode_path=str(gcode_path.resolve()),  # noqa: E731
+                                       program=program, state=state, preamble=preamble)
+    try:
+        final, interrupted = _run_job(link, job)
+    finally:
+        link.close()
     print(file=sys.stderr)
-    print(f"{final.status}: {final.commands_done}/{final.commands_total} lines, job state in {job_path}")
+    note = "; not resumable" if final.status == "cancelled" else ""
+    if final.message and final.status != "cancelled":
+        note += f"; {final.message}"
+    print(f"{final.status}: {final.commands_done}/{final.commands_total} lines, job state in {job_path}{note}")
     return 130 if interrupted else 0

@@ -1,16 +1,19 @@
 """Printer links: Marlin over USB serial, and OctoPrint's REST API.
 
 `SerialPrinter` and `OctoPrintLink` share the `PrintLink` interface and report
-`Progress` (lines, layer, percent, ETA, temperatures).
+`Progress` (lines, layer, percent, ETA, temperatures); `make_link(target)`
+makes either from a `SerialTarget` or an `OctoPrintTarget`. The serial
+protocol's rules are the state object `stream.LineStream`.
 """
 
 from .base import LinkError, LinkLost, PrinterHalted, PrinterReset, PrintLink, Progress
+from .factory import OctoPrintTarget, SerialTarget, make_link
 from .job import JobFileError, JobState, Program, cancel_commands, resume_commands
 
 __all__ = [
     "LinkError", "LinkLost", "PrinterHalted", "PrinterReset", "PrintLink", "Progress",
     "JobFileError", "JobState", "Program", "cancel_commands", "resume_commands",
-    "SerialPrinter", "OctoPrintLink",
+    "SerialPrinter", "OctoPrintLink", "make_link", "SerialTarget", "OctoPrintTarget",
 ]
 
 

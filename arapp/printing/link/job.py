@@ -20,6 +20,7 @@ import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from ..profile import load_profile
 from .protocol import clean_command
 
 JOB_FORMAT = "arapp-printjob/1"
@@ -252,6 +253,9 @@ def check_job_fields(data: dict, path, profile=None) -> None:
     and field). Ranges: positions within the profile's bed (mm, `BED_MARGIN_MM` outside allowed),
     heater targets from 0 to the profile's maxima (degrees C), counts and `next_line` >= 0; the
     G-code's sha256 is required."""
+    if profile is None:
+        profile = load_profile(None)  # the generic printer, as every command assumes without --printer
+
     def bad(key, why):
         return JobFileError(f"{path}: field '{key}' {why} (got {data.get(key)!r}); fix or delete the job file")
 

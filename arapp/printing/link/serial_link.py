@@ -457,7 +457,10 @@ class SerialPrinter(PrintLink):
                 if stop is None:
                     state.message = self.save_error
         if state is not None:
-            report(finish.status, force=True)
+            try:
+                report(finish.status, force=True)
+            except Exception:  # noqa: BLE001 - the caller's callback failed; the stop below says what ended the print
+                log.exception("the progress callback failed")
         if stop is None:
             return
         message = stop.message
