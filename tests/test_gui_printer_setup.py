@@ -185,3 +185,31 @@ def test_the_printer_and_port_are_remembered(qtbot, tmp_path):
     third = PrinterSetupDialog(ports=PORTS)
     qtbot.addWidget(third)
     assert third.profile.currentData() == path and "250 x 210 x 210 mm" in third.profile_info.text()
+
+
+def test_saved_choice_gives_the_link_target_and_profile(qtbot, octo):  # noqa: F811
+    from arapp.gui.printer_setup import PrinterSetupDialog, saved_choice
+    from arapp.printing.connection_check import saved_profile, saved_target
+    from arapp.printing.link.factory import OctoPrintTarget, SerialTarget, make_link
+
+    assert saved_target({}) is None and saved_profile({}) is None
+    dlg = PrinterSetupDialog(ports=PORTS)
+    qtbot.addWidget(dlg)
+    dlg.profile.setCurrentIndex(dlg.profile.findData("preset:prusa_mk3s"))
+    dlg.port.setCurrentIndex(dlg.port.findData("/dev/ttyACM0"))
+    dlg.save_button.click()
+    assert saved_target(saved_choice()) == SerialTarget("/dev/ttyACM0", 115200)
+    assert saved_profile(saved_choice()).name == "Prusa i3 MK3S"
+    url = octo.url
+    dlg = PrinterSetupDialog(ports=PORTS)
+    qtbot.addWidget(dlg)
+    dlg.octo_radio.setChecked(True)
+    dlg.url.setText(url)
+    dlg.key.setText(FAKE_KEY)
+    dlg.save_button.click()
+    target = saved_target(saved_choice())
+    assert isinstance(target, OctoPrintTarget) and target.url == url
+    link = make_link(target)  # the stored key file is what the print link reads
+    link.connect()
+    assert link.version == "OctoPrint 1.11.8"
+    link.close()

@@ -125,3 +125,29 @@ def stored_octoprint_key(url: str) -> str | None:
         return load_api_key(path)
     except ApiKeyError:
         return None
+
+
+def saved_target(choice: dict):
+    """The printer-link target (arapp.printing.link.factory SerialTarget / OctoPrintTarget) of a saved
+    printer set-up (arapp.gui.printer_setup.saved_choice()), or None when it names no port or server.
+    An OctoPrint target points at the stored key file."""
+    from arapp.printing.link.factory import OctoPrintTarget, SerialTarget
+
+    if choice.get("link") == "octoprint":
+        url = str(choice.get("url") or "").strip().rstrip("/")
+        return OctoPrintTarget(url, str(octoprint_key_path(url))) if url else None
+    port = str(choice.get("port") or "")
+    return SerialTarget(port, int(choice.get("baud") or 115200)) if port else None
+
+
+def saved_profile(choice: dict):
+    """The printer profile of a saved set-up (a preset or a profile file), or None when it names none."""
+    from arapp.printing.presets import preset_profile
+    from arapp.printing.profile import load_profile
+
+    profile = choice.get("profile")
+    if not isinstance(profile, str) or not profile or profile == "file":
+        return None
+    if profile.startswith("preset:"):
+        return preset_profile(profile[len("preset:"):])
+    return load_profile(profile)
