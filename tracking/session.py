@@ -64,8 +64,9 @@ class AnchorSpec:
         return d
 
     @property
-    def dictionary_id(self) -> int:
-        return getattr(cv2.aruco, self.dictionary)
+    def dictionary_id(self) -> int | str:
+        """OpenCV's id of a predefined dictionary; for a dictionary file, its path (see anchors/dictionaries.py)."""
+        return getattr(cv2.aruco, self.dictionary) if self.dictionary.startswith("DICT_") else self.dictionary
 
     def marker_ids(self) -> list[int]:
         """The ArUco ids this anchor uses (empty for QR)."""
@@ -118,8 +119,9 @@ def parse_rigid(value, where: str) -> np.ndarray:
     return T
 
 
-def parse_anchor(d: dict, where: str = "anchors[0]") -> AnchorSpec:
-    """An `AnchorSpec` from its JSON block; every error names the field, e.g. `anchors[1].length`."""
+def parse_anchor(d: dict, where: str = "anchors[0]", folder: str | Path | None = None) -> AnchorSpec:
+    """An `AnchorSpec` from its JSON block; every error names the field, e.g. `anchors[1].length`.
+    `folder`: where a relative dictionary-file path is read from (default: the current folder)."""
     if not isinstance(d, dict):
         raise SessionError(f"{where}: must be an object")
     kind = d.get("kind")
@@ -144,13 +146,16 @@ def parse_anchor(d: dict, where: str = "anchors[0]") -> AnchorSpec:
     if "separation" in spec and spec["separation"] < 0:
         raise SessionError(f"{where}.separation: must not be negative")
     if "dictionary" in spec:
+        from tracking.anchors.dictionaries import dictionary_size, is_custom
         names = aruco_dictionary_names()
-        if spec["dictionary"] not in names:
+        if is_custom(spec["dictionary"]):  # a dictionary file (custom markers), relative to the recording folder
+            spec["dictionary"] = str((Path(folder or ".") / spec["dictionary"]).resolve())
+        elif spec["dictionary"] not in names:
             raise SessionError(
                 f"{where}.dictionary: {spec['dictionary']!r} is not an OpenCV ArUco dictionary; "
-                f"use one of {', '.join(names[:6])}, ..."
+                f"use one of {', '.join(names[:6])}, ... or a dictionary file (.yml)"
             )
-        size = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, spec["dictionary"])).bytesList.shape[0]
+        size = dictionary_size(spec["dictionary"], f"{where}.dictionary")
         a = AnchorSpec(kind=kind, **spec)
         ids = a.marker_ids()
         if ids and (min(ids) < 0 or max(ids) >= size):
@@ -162,11 +167,11 @@ def parse_anchor(d: dict, where: str = "anchors[0]") -> AnchorSpec:
     return anchor
 
 
-def parse_anchors(blocks, where: str = "anchors") -> list[AnchorSpec]:
+def parse_anchors(blocks, where: str = "anchors", folder: str | Path | None = None) -> list[AnchorSpec]:
     """The `anchors` list of a session; the first anchor defines the world (its transform must be identity)."""
     if not isinstance(blocks, list) or not blocks:
         raise SessionError(f"{where}: must be a non-empty list of anchors")
-    anchors = [parse_anchor(b, f"{where}[{i}]") for i, b in enumerate(blocks)]
+    anchors = [parse_anchor(b, f"{where}[{i}]", folder) for i, b in enumerate(blocks)]
     if not np.allclose(anchors[0].world_from_anchor, np.eye(4), atol=1e-9):
         raise SessionError(f"{where}[0].world_from_anchor: the first anchor defines the world and must be the identity")
     return anchors
@@ -220,7 +225,7 @@ def parse_session(data: dict, folder: Path, where: str = "session.json") -> Sess
     except CalibrationError as e:
         raise SessionError(f"{where}: {e}") from None
     try:
-        anchors = parse_anchors(data.get("anchors"))
+        anchors = parse_anchors(data.get("anchors"), folder=folder)
     except SessionError as e:
         raise SessionError(f"{where}: {e}") from None
     source = data.get("source", {"kind": "file"})

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from tracking.anchors.dictionaries import aruco_dictionary
 from tracking.anchors.model import AnchorModel
 from tracking.anchors.edges import refine_squares
 from tracking.camera import Camera
@@ -47,18 +48,19 @@ class ArucoDetection:
     def __init__(self, models: list[AnchorModel], camera: Camera):
         self.camera = camera
         self.models = [m for m in models if m.kind != "qr"]
-        self.by_dict: dict[int, dict[int, AnchorModel]] = {}
+        self.by_dict: dict[str, dict[int, AnchorModel]] = {}  # dictionary name (or file) -> id -> anchor
         for m in self.models:
-            ids = self.by_dict.setdefault(m.spec.dictionary_id, {})
+            ids = self.by_dict.setdefault(m.spec.dictionary, {})
             for mid in m.markers:
                 ids[mid] = m
         # Corners come from edge fitting (edges.py), more exact than the detector's own subpixel step.
         params = detector_parameters()
         params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
-        self.bits = {d: cv2.aruco.getPredefinedDictionary(d).markerSize + 2 for d in self.by_dict}
-        self.detectors = {
-            d: cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(d), params) for d in self.by_dict
-        }
+        # marker side in cells (bits + black border), by dictionary name; also by AnchorSpec.dictionary_id,
+        # the key other modules use (for a dictionary file that is its path, the same as the name)
+        self.bits = {d: aruco_dictionary(d).markerSize + 2 for d in self.by_dict}
+        self.bits.update({m.spec.dictionary_id: self.bits[m.spec.dictionary] for m in self.models})
+        self.detectors = {d: cv2.aruco.ArucoDetector(aruco_dictionary(d), params) for d in self.by_dict}
         self.charuco = {}
         for m in self.models:
             if m.kind == "charuco":
@@ -143,7 +145,7 @@ class ArucoDetection:
             return None
         quads = px.reshape(-1, 4, 2)
         side = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).min(axis=1)
-        cell = side / np.array([self.bits[by_index[a].spec.dictionary_id] for a, _ in keys])
+        cell = side / np.array([self.bits[by_index[a].spec.dictionary] for a, _ in keys])
         refined, ok = refine_squares(gray, quads, cell, self.camera)
         if ok.sum() < max(1, min_fraction * len(keys)):
             return None

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from tracking.anchors.dictionaries import aruco_dictionary
 from tracking.errors import SessionError
 from tracking.poses import transform_points
 from tracking.session import AnchorSpec
@@ -24,7 +25,7 @@ def square_corners(length: float) -> np.ndarray:
 
 def grid_board(spec: AnchorSpec) -> cv2.aruco.GridBoard:
     """The OpenCV GridBoard of an `aruco_board` anchor (ids first_id ...)."""
-    d = cv2.aruco.getPredefinedDictionary(spec.dictionary_id)
+    d = aruco_dictionary(spec.dictionary)
     ids = np.arange(spec.first_id, spec.first_id + spec.markers_x * spec.markers_y, dtype=np.int32)
     return cv2.aruco.GridBoard((spec.markers_x, spec.markers_y), spec.marker_length, spec.separation, d, ids)
 
@@ -35,7 +36,7 @@ def charuco_board(spec: AnchorSpec) -> cv2.aruco.CharucoBoard:
         raise SessionError(
             f"charuco anchor: marker_length {spec.marker_length} must be smaller than square_length "
             f"{spec.square_length}")
-    d = cv2.aruco.getPredefinedDictionary(spec.dictionary_id)
+    d = aruco_dictionary(spec.dictionary)
     n = (spec.squares_x * spec.squares_y) // 2
     ids = np.arange(spec.first_id, spec.first_id + n, dtype=np.int32)
     return cv2.aruco.CharucoBoard((spec.squares_x, spec.squares_y), spec.square_length, spec.marker_length, d, ids)
