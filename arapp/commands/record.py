@@ -26,6 +26,14 @@ def run(args):
     from tracking.recorder import record
     from tracking.sources import open_source
 
+    from arapp.exchange.staging import staged_folder
+
+    for flag, value in (("--seconds", args.seconds), ("--fps", args.fps)):
+        if value is not None and not 0 < value <= 86400:
+            raise ValueError(f"{flag} must be above 0 (and at most 86400), got {value}")
+    for flag, value in (("--width", args.width), ("--height", args.height)):
+        if value is not None and not 0 < value <= 16384:
+            raise ValueError(f"{flag} must be 1 to 16384 pixels, got {value}")
     anchors = None
     if args.anchors:
         path = Path(args.anchors)
@@ -42,6 +50,8 @@ def run(args):
     with open_source(args.source, calibration=args.calibration, width=args.width, height=args.height,
                      fps=args.fps) as src:
         src.camera  # noqa: B018 - fail before creating files if the source has no calibration
-        session = record(src, out, anchors=anchors, seconds=args.seconds, force=args.force, fourcc=args.codec)
-    print(f"{session.folder}: {session.video}, {session.camera.width}x{session.camera.height} @ {session.fps:.1f} fps")
+        # Recorded into a temporary folder that replaces --out at the end: a failure leaves nothing behind.
+        with staged_folder(out, replace=True) as tmp:
+            session = record(src, tmp, anchors=anchors, seconds=args.seconds, force=True, fourcc=args.codec)
+    print(f"{out}: {session.video}, {session.camera.width}x{session.camera.height} @ {session.fps:.1f} fps")
     return 0

@@ -21,9 +21,24 @@ def add_arguments(parser):
     parser.add_argument("--layer", type=int, help="with --toolpaths: highlight this layer, dim those below")
 
 
+def check_args(args) -> None:
+    """Refuse counts no replay can use, naming the flag, before anything is read or written."""
+    if args.frames is not None and args.frames < 1:
+        raise ValueError(f"--frames must be 1 or more (frames to replay), got {args.frames}")
+    if not 1 <= args.marker_every <= 1000:
+        raise ValueError(f"--marker-every must be 1 to 1000 (frames), got {args.marker_every}")
+    if args.layer is not None and args.layer < 0:
+        raise ValueError(f"--layer must be 0 or more (layers count from 0), got {args.layer}")
+
+
 def run(args):
+    from arapp.exchange.staging import staged_folder
+    from arapp.geometry.model import check_size_mm
     from arapp.replay import ReplayOptions, replay, terminal_progress
 
+    check_args(args)
+    if args.size is not None:
+        check_size_mm(args.size, "--size")
     placement = None
     if args.size is not None:
         placement = {"size_mm": args.size}
@@ -31,7 +46,9 @@ def run(args):
                          slam=not args.no_slam, max_frames=args.frames, printer=args.printer,
                          toolpaths=args.toolpaths, layer=args.layer,
                          tracker_params={"marker_every": args.marker_every} if not args.no_slam else {})
-    report = replay(args.recording, args.out, opts, progress=terminal_progress())
+    # Written to a temporary folder moved into place at the end: a failure leaves no (empty) --out behind.
+    with staged_folder(args.out) as tmp:
+        report = replay(args.recording, tmp, opts, progress=terminal_progress())
     keys = ["frames", "tracked_fraction", "fps", "ate_rmse_m", "ate_max_m", "rpe_trans_m_per_s", "rpe_rot_deg_per_s"]
     summary = ", ".join(f"{k} {report[k]:.4g}" for k in keys if isinstance(report.get(k), (int, float)))
     print(f"replay: {summary}")

@@ -16,6 +16,7 @@ def run(args):
     import sys
     from pathlib import Path
 
+    from arapp.exchange.staging import staged_folder
     from tracking.synth import scene_from_arg, synthesize
     from tracking.synth.presets import PRESETS
 
@@ -27,6 +28,8 @@ def run(args):
         return 0
     if not args.out:
         raise ValueError("--out is required: the recording folder to write (e.g. recordings/my_scene)")
+    if args.frames is not None and args.frames < 1:
+        raise ValueError(f"--frames must be 1 or more (frames to render), got {args.frames}")
     names = list(PRESETS) if args.scene == "all" else [args.scene]
     for name in names:
         scene = scene_from_arg(name)
@@ -36,7 +39,11 @@ def run(args):
             if i % 10 == 0 or i == n:
                 print(f"\r{out}: frame {i}/{n}", end="", file=sys.stderr, flush=True)
 
-        session = synthesize(scene, out, force=args.force, max_frames=args.frames, progress=progress)
+        if out.is_dir() and any(out.iterdir()) and not args.force:
+            raise FileExistsError(f"{out}: already holds files (a recording?); use --force to overwrite it")
+        # Rendered into a temporary folder that replaces `out` at the end: a failure leaves nothing behind.
+        with staged_folder(out, replace=True) as tmp:
+            session = synthesize(scene, tmp, force=True, max_frames=args.frames, progress=progress)
         size = sum(p.stat().st_size for p in out.iterdir()) / 1e6
         print(f"\rwrote {out}: {session.camera.width}x{session.camera.height}, "
               f"{scene.frame_count if args.frames is None else min(args.frames, scene.frame_count)} frames, "
