@@ -11,7 +11,7 @@ from tracking.session import load_session
 from tracking.sources import RecordingSource
 from tracking.synth import scene_from_arg
 from tracking.synth.patterns import anchor_corners
-from tracking.synth.presets import PRESETS
+from tracking.synth.presets import PRESETS, TEST, TUNING
 from tracking.synth.renderer import DeskRenderer
 
 from conftest import ROOT
@@ -59,6 +59,18 @@ def ground_truth_pixels(session, anchor, pose):
     return session.camera.project_world(obj, pose)
 
 
+def rolling_shutter_pixels(session, anchor, renderer, t, readout):
+    """Ground-truth corners under a rolling shutter: each corner seen at the time of the row it lands on
+    (row y exposed at t + readout * ((y + 0.5) / H - 0.5)), by fixed-point iteration on the trajectory."""
+    obj = transform_points(anchor.world_from_anchor, anchor_corners(anchor)).reshape(-1, 3)
+    cam = session.camera
+    px = cam.project_world(obj, renderer.world_from_camera(t))
+    for _ in range(4):
+        px = np.array([cam.project_world(p, renderer.world_from_camera(t + readout * ((q[1] + 0.5) / cam.height - 0.5)))
+                       for p, q in zip(obj, px)])
+    return px.reshape(-1, 4, 2)
+
+
 @pytest.mark.parametrize("name", list(PRESETS))
 def test_recording_is_complete_and_consistent(name):
     folder = RECORDINGS / name
@@ -71,13 +83,21 @@ def test_recording_is_complete_and_consistent(name):
     assert len(frames) == src.frame_count == len(times) == round(PRESETS[name]["duration"] * PRESETS[name]["fps"])
     np.testing.assert_allclose([f.t for f in frames], times, atol=1e-6)
     # ground truth on frames of low motion (blur moves detections): detections sit on the projected corners
+    # (with a rolling shutter: each at its row's time); frames with a hand on the anchor are left out
     speed = np.r_[0, np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1)] * session.fps
+    fx = PRESETS[name].get("effects", {})
+    readout = float(fx.get("rolling_shutter") or 0.0)
+    occ = fx.get("occluder") or {}
+    renderer = DeskRenderer(scene_from_arg(name)) if readout else None
     errs = []
     for anchor_index, anchor in enumerate(session.anchors):
         for f in frames[::5]:
-            if speed[f.index] > 0.15:
+            if speed[f.index] > 0.15 or occ.get("start", 1e9) <= f.t <= occ.get("end", -1):
                 continue
-            gt = ground_truth_pixels(session, anchor, poses[f.index])
+            if readout:
+                gt = rolling_shutter_pixels(session, anchor, renderer, times[f.index], readout)
+            else:
+                gt = ground_truth_pixels(session, anchor, poses[f.index])
             for k, c in detect_precise(anchor, f.image).items():
                 errs.append(np.nanmax(np.abs(c - gt[k])))
     assert len(errs) >= 3, "the anchors were detected too rarely to check the ground truth"
@@ -85,8 +105,11 @@ def test_recording_is_complete_and_consistent(name):
 
 
 def test_set_is_small_and_covers_the_cases():
-    total = sum(p.stat().st_size for p in RECORDINGS.rglob("*") if p.is_file())
-    assert total < 20e6, f"recordings/ holds {total / 1e6:.1f} MB; the budget is 20 MB"
+    def size(names):
+        return sum(p.stat().st_size for n in names for p in (RECORDINGS / n).rglob("*") if p.is_file())
+
+    assert size(TUNING) < 20e6, f"the tuning recordings hold {size(TUNING) / 1e6:.1f} MB; the budget is 20 MB"
+    assert size(TEST) < 12e6, f"the test recordings hold {size(TEST) / 1e6:.1f} MB; the budget is 12 MB"
     sizes = {(load_session(RECORDINGS / n).camera.width, load_session(RECORDINGS / n).camera.height) for n in PRESETS}
     assert {(640, 480), (1280, 720)} <= sizes
     bed = load_session(RECORDINGS / "printer_bed").anchors[0]
@@ -134,3 +157,51 @@ def test_committed_board_orbit_matches_its_generator():
     np.testing.assert_allclose(pose, poses[45], atol=1e-6)
     assert f.t == pytest.approx(t, abs=1e-6)
     assert np.abs(img.astype(float) - f.image).mean() < 4.0
+
+
+def test_test_recordings_are_apart_from_the_tuning_ones():
+    """Test recordings come from seeds (scene and desk) no tuning recording uses, are named test_*, and
+    recordings/README.md lists every recording under its kind."""
+    def seeds(names):
+        return {PRESETS[n]["seed"] for n in names} | {PRESETS[n]["desk"]["seed"] for n in names}
+
+    assert TEST and TUNING and not set(TEST) & set(TUNING)
+    assert not seeds(TEST) & seeds(TUNING)
+    assert all(n.startswith("test_") for n in TEST) and not any(n.startswith("test_") for n in TUNING)
+    readme = (RECORDINGS / "README.md").read_text()
+    tuning_part, test_part = readme.split("## Test recordings", 1)
+    assert all(f"| {n} |" in tuning_part for n in TUNING)
+    assert all(f"| {n} |" in test_part for n in TEST)
+    assert "no parameter is chosen by looking at a test recording" in readme
+
+
+def test_hand_border_timeline():
+    """test_hand_border: the marker is detected before the hand comes and after it has gone, and the hand
+    (skin pixels by Kovac's RGB rule) is on the marker's sheet only between the occluder's start and end."""
+    folder = RECORDINGS / "test_hand_border"
+    session = load_session(folder)
+    occ = PRESETS["test_hand_border"]["effects"]["occluder"]
+    anchor = session.anchors[0]
+    _, poses = read_tum(folder / "groundtruth.tum")
+    skin_on_sheet, seen = {}, {}
+    with RecordingSource(folder) as src:
+        for f in src:
+            if f.index % 3:
+                continue
+            px = ground_truth_pixels(session, anchor, poses[f.index])[0]
+            centre = px.mean(axis=0)
+            sheet = np.zeros(f.image.shape[:2], np.uint8)
+            cv2.fillPoly(sheet, [np.round(centre + (px - centre) * 1.4).astype(np.int32)], 1)  # most of the 0.25 L margin
+            sheet = cv2.erode(sheet, np.ones((5, 5), np.uint8)).astype(bool)
+            b, g, r = (f.image[..., k].astype(int) for k in range(3))
+            skin = ((r > 95) & (g > 40) & (b > 20) & (f.image.max(axis=2).astype(int) - f.image.min(axis=2) > 15)
+                    & (np.abs(r - g) > 15) & (r > g) & (r > b))
+            skin_on_sheet[f.t] = int((skin & sheet).sum())
+            seen[f.t] = bool(detect(anchor, f.image))
+    before = [t for t in skin_on_sheet if t < occ["start"]]
+    after = [t for t in skin_on_sheet if t > occ["end"]]
+    middle = [t for t in skin_on_sheet if occ["start"] + occ["ramp"] <= t <= occ["end"] - occ["ramp"]]
+    assert before and after and middle
+    assert all(skin_on_sheet[t] == 0 for t in before + after)
+    assert all(skin_on_sheet[t] > 30 for t in middle)
+    assert all(seen[t] for t in before + after)

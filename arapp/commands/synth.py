@@ -18,13 +18,13 @@ def run(args):
 
     from arapp.exchange.staging import staged_folder
     from tracking.synth import scene_from_arg, synthesize
-    from tracking.synth.presets import PRESETS
+    from tracking.synth.presets import PRESETS, TEST
 
     if args.list or not args.scene:
         for name, p in PRESETS.items():
             cam = p["camera"]
-            print(f"{name:18s} {cam['width']}x{cam['height']} {p['duration']:.1f} s  "
-                  f"{', '.join(a['kind'] for a in p['anchors'])}  {p['trajectory']['kind']}")
+            print(f"{name:18s} {'test  ' if name in TEST else 'tuning'} {cam['width']}x{cam['height']} "
+                  f"{p['duration']:.1f} s  {', '.join(a['kind'] for a in p['anchors'])}  {p['trajectory']['kind']}")
         return 0
     if not args.out:
         raise ValueError("--out is required: the recording folder to write (e.g. recordings/my_scene)")
