@@ -65,7 +65,7 @@ def synth_recording(folder: Path, frames: int = 150) -> Path:
 def headless_fps(recording: Path, frames: int) -> float:
     """Frames per second of the bare pipeline loop (read, track, render), no GUI."""
     from arapp.geometry import load_model
-    from arapp.gui.editing import display_placement
+    from arapp.app.editing import display_placement
     from arapp.pipeline import Pipeline
     from tracking.sources import RecordingSource
 
@@ -171,7 +171,7 @@ def naive_gui_run(recording: Path, seconds: float) -> dict:
 
     from arapp.geometry import load_model
     from arapp.gui.app import get_app
-    from arapp.gui.editing import display_placement
+    from arapp.app.editing import display_placement
     from arapp.gui.probe import BlockProbe
     from arapp.gui.view import VideoView
     from arapp.gui.workers import bgr_qimage

@@ -167,7 +167,7 @@ def test_overlay_pixels_where_the_model_projects(qtbot, window, recording, engin
     qtbot.waitUntil(lambda: window.source_info is not None, timeout=TIMEOUT_MS)
     qtbot.waitUntil(lambda: window.last_shown is not None and window.last_shown.result.world_from_camera is not None
                     and overlay_mask(window.last_shown).sum() > 200, timeout=TIMEOUT_MS)
-    window.engine.pause()
+    window.session.pause()
     qtbot.wait(300)  # a frame in flight lands
     shown = window.last_shown
     assert shown.result.world_from_camera is not None
@@ -264,11 +264,11 @@ def test_print_dialog_opens_with_the_placed_model(qtbot, window):
     window.open_model(str(MODELS / "sphere.json"))
     wait_model(qtbot, window, "sphere.json")
     window.model_panel.size.setValue(40.0)
-    assert window.placement["size_mm"] == 40.0
+    assert window.placement.size_mm == 40.0
     qtbot.keyClick(window, Qt.Key.Key_P)
     dlg = window._print_dialog
     assert dlg is not None and dlg.isVisible()
-    assert dlg.placement["size_mm"] == 40.0
+    assert dlg.placement.size_mm == 40.0
     qtbot.waitUntil(lambda: dlg.solid is not None, timeout=TIMEOUT_MS)
     from arapp.printing import load_profile
 
@@ -303,7 +303,7 @@ def test_corrupt_model_file_gives_its_dialog(qtbot, window, tmp_path):
 
 
 def test_missing_camera_gives_its_dialog(qtbot, window):
-    from arapp.gui.sourcespec import open_spec
+    from arapp.app.sourcespec import open_spec
 
     spec = "v4l2:/dev/video63"
     with pytest.raises((ValueError, OSError, RuntimeError)) as expected:
@@ -330,7 +330,7 @@ def test_shortcuts_and_settings(qtbot, window, recording, tmp_path):
     qtbot.waitUntil(lambda: window.last_shown.result.extra["resets"] == 1, timeout=TIMEOUT_MS)
     window.model_panel.mode.setCurrentText("wireframe")
     assert window.settings.value("mode") == "wireframe"
-    assert window._recent("recent_sources")[0] == str(recording)
+    assert window.session.recent("recent_sources")[0] == str(recording)
     qtbot.waitUntil(lambda: window.last_shown.result.extra["mode"] == "wireframe", timeout=TIMEOUT_MS)
 
 
@@ -390,7 +390,7 @@ def test_print_dialog_slices_saves_and_reports_a_printer_error(qtbot, window, tm
 
 def test_source_picker_lists_cameras_and_opens_a_recent_source(qtbot, window, recording):
     from arapp.gui.source_dialog import SourceDialog
-    from arapp.gui.sourcespec import list_devices
+    from arapp.app.sourcespec import list_devices
     from tracking.sources import list_depthai, list_v4l2
 
     expected = [d["spec"] for d in list_v4l2()] + [d["spec"] for d in list_depthai()]
@@ -438,7 +438,7 @@ def test_selected_control_point_is_ringed_in_the_view(qtbot, window, recording):
     wait_model(qtbot, window, "rational_5x5.json")
     qtbot.waitUntil(lambda: shows_current_model(window, len(window.mesh_lines[0].faces))
                     and window.last_shown.result.world_from_camera is not None, timeout=TIMEOUT_MS)
-    window.engine.pause()
+    window.session.pause()
     panel = window.model_panel
     panel.u_index.setValue(4)
     panel.v_index.setValue(4)
@@ -473,12 +473,12 @@ def test_dragging_on_the_view_places_the_model(qtbot, window, recording):
     wait_model(qtbot, window, "sphere.json")
     qtbot.waitUntil(lambda: window.last_shown is not None and window.last_shown.result.world_from_camera is not None
                     and overlay_mask(window.last_shown).sum() > 200, timeout=TIMEOUT_MS)
-    window.engine.pause()
+    window.session.pause()
     qtbot.wait(300)
     shown = window.last_shown
     info = window.source_info
     T = world_from_placement(info.anchors[0])
-    start = dict(window.placement)
+    start = window.placement
     view = window.view
 
     def widget_pos(x_mm, y_mm) -> QPoint:
@@ -498,35 +498,33 @@ def test_dragging_on_the_view_places_the_model(qtbot, window, recording):
     qtbot.mouseMove(view, widget_pos(25, 0))
     qtbot.mouseRelease(view, Qt.MouseButton.LeftButton, pos=widget_pos(25, 0))
     # a widget pixel is about 0.5 mm on the paper here
-    assert window.placement["offset"][0] == pytest.approx(start["offset"][0] + 25.0, abs=1.5)
-    assert window.placement["offset"][1] == pytest.approx(start["offset"][1], abs=1.5)
-    assert window.model_panel.offset[0].value() == pytest.approx(window.placement["offset"][0], abs=0.06)
+    assert window.placement.offset[0] == pytest.approx(start.offset[0] + 25.0, abs=1.5)
+    assert window.placement.offset[1] == pytest.approx(start.offset[1], abs=1.5)
+    assert window.model_panel.offset[0].value() == pytest.approx(window.placement.offset[0], abs=0.06)
     # the drawn model moved with it: the overlay's centre is where the new foot projects (within a few px)
     qtbot.waitUntil(lambda: window.last_shown is not shown, timeout=TIMEOUT_MS)
     qtbot.wait(300)
     import dataclasses
 
-    from arapp.placement import placement_from_any
-
-    placed = dataclasses.replace(window.model, placement=placement_from_any(window.placement))
+    placed = dataclasses.replace(window.model, placement=window.placement)
     drawn = overlay_mask(window.last_shown)
     expected, _ = projected_mask(window, window.last_shown, placed)
     assert iou(drawn, expected) > 0.85
     # the paused frame drawn again is not a capture-to-paint latency
     assert len(window.latencies_ms) == latencies
     # Shift+drag a quarter turn around the model
-    x0 = window.placement["offset"][0]
-    rz0 = window.placement["rotation_deg"][2]
+    x0 = window.placement.offset[0]
+    rz0 = window.placement.rotation_deg[2]
     qtbot.mousePress(view, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.ShiftModifier, widget_pos(x0 + 30, 0))
     qtbot.mouseMove(view, widget_pos(x0, 30))
     qtbot.mouseRelease(view, Qt.MouseButton.LeftButton, Qt.KeyboardModifier.ShiftModifier, widget_pos(x0, 30))
-    assert window.placement["rotation_deg"][2] == pytest.approx(rz0 + 90.0, abs=3.0)
-    assert window.placement["offset"][0] == pytest.approx(x0, abs=1e-9)
+    assert window.placement.rotation_deg[2] == pytest.approx(rz0 + 90.0, abs=3.0)
+    assert window.placement.offset[0] == pytest.approx(x0, abs=1e-9)
     # two wheel notches away from the user: 1.1^2 times the size
-    size0 = window.placement["size_mm"]
+    size0 = window.placement.size_mm
     pos = QPointF(widget_pos(x0, 0))
     ev = QWheelEvent(pos, view.mapToGlobal(pos), QPoint(0, 0), QPoint(0, 240), Qt.MouseButton.NoButton,
                      Qt.KeyboardModifier.NoModifier, Qt.ScrollPhase.NoScrollPhase, False)
     view.wheelEvent(ev)
-    assert window.placement["size_mm"] == pytest.approx(size0 * 1.21, rel=1e-6)
+    assert window.placement.size_mm == pytest.approx(size0 * 1.21, rel=1e-6)
     assert window.model_panel.size.value() == pytest.approx(size0 * 1.21, abs=0.06)

@@ -267,7 +267,7 @@ def test_preview_layer_slider_scrubs_the_bed_overlay(qtbot, window, tmp_path, be
         assert info["layer"] == k and info["z"] == pytest.approx(layers[k].z)
     # the perimeters drawn lie where that layer's G-code projects with the frame's pose
     qtbot.waitUntil(lambda: window.last_shown.result.world_from_camera is not None, timeout=TIMEOUT_MS)
-    window.engine.pause()
+    window.session.pause()
     qtbot.wait(300)
     shown = window.last_shown
     assert perimeter_pixels_on_gcode(shown, layers[mid], bed_profile, KIND_COLOURS["perimeter"]) > 0.9
@@ -420,7 +420,7 @@ def test_gui_command_draws_toolpaths_for_a_screenshot(tmp_path, bed_profile):
 def test_old_slices_are_pruned_but_resumable_jobs_kept(tmp_path):
     import os
 
-    from arapp.gui.print_dialog import prune_slices
+    from arapp.app.print_session import prune_slices
 
     paths = []
     for i in range(14):

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from arapp.gui.slots import LatestSlot
+from arapp.app.slots import LatestSlot
 
 
 @dataclass
@@ -77,7 +77,7 @@ def test_latest_slot_wakes_a_waiting_consumer():
 
 
 def test_player_paces_at_the_recorded_times_and_speed():
-    from arapp.gui.workers import Player
+    from arapp.app.player import Player
 
     slot = LatestSlot()
     src = ListSource(12, fps=30.0)
@@ -95,7 +95,7 @@ def test_player_paces_at_the_recorded_times_and_speed():
 
 
 def test_player_seek_step_and_loop():
-    from arapp.gui.workers import Player
+    from arapp.app.player import Player
 
     slot = LatestSlot()
     src = ListSource(20)
@@ -159,7 +159,8 @@ class CountingSource(ListSource):
 
 
 def run_slow_stage(src, on_demand: bool = False) -> tuple[list, LatestSlot, object]:
-    from arapp.gui.workers import Player, Processor
+    from arapp.app.player import Player
+    from arapp.app.processor import Processor
 
     captured, shown = LatestSlot(), LatestSlot()
     ended = threading.Event()
@@ -215,7 +216,8 @@ def test_a_slow_stage_drops_live_frames_instead_of_adding_latency():
 
 
 def test_processor_applies_commands_between_frames_and_redraws_when_paused():
-    from arapp.gui.workers import Captured, Processor
+    from arapp.app.player import Captured
+    from arapp.app.processor import Processor
 
     class Pipeline:
         def __init__(self):
@@ -258,8 +260,8 @@ def test_processor_applies_commands_between_frames_and_redraws_when_paused():
 
 def test_gui_recorder_writes_a_recording_that_replays(tmp_path):
     """The record button's writer: frames handed over from the capture thread come back from the recording."""
-    from arapp.gui.recording import GuiRecorder, new_recording_folder
-    from arapp.gui.workers import Captured
+    from arapp.app.recording import GuiRecorder, new_recording_folder
+    from arapp.app.player import Captured
     from tracking.camera import Camera
     from tracking.session import parse_anchors
     from tracking.sources import RecordingSource
@@ -295,7 +297,7 @@ def test_gui_recorder_writes_a_recording_that_replays(tmp_path):
 def test_a_camera_lost_mid_stream_is_reported_not_raised():
     """tracking.sources ends a vanished camera's stream with `.error` set; the player turns it into a
     'Camera lost' report with that message and ends cleanly."""
-    from arapp.gui.workers import Player
+    from arapp.app.player import Player
 
     class DyingCamera(ListSource):
         kind = "v4l2"
@@ -325,7 +327,7 @@ def test_marker_sheets_print_the_anchors_in_use(tmp_path):
     """The tracking panel's 'Marker sheets' button: the sheet of each anchor is detected as that anchor."""
     import cv2
 
-    from arapp.gui.sheets import save_sheets
+    from arapp.app.sheets import save_sheets
 
     blocks = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
                "marker_length": 0.04, "separation": 0.01, "first_id": 0},

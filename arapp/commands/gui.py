@@ -33,7 +33,7 @@ def run(args):
 
         if not Path(toolpaths).is_file():
             raise ValueError(f"--toolpaths {toolpaths}: no such file; slice a model first (arapp slice MODEL -o FILE)")
-        from arapp.gui.toolpaths import ToolpathBuilder
+        from arapp.app.toolpaths import ToolpathBuilder
 
         ToolpathBuilder().profile(printer)  # a missing profile or bed anchor: say so now, not in a dialog
     return run_gui(source=getattr(args, "source", None), model=getattr(args, "model", None),

@@ -7,6 +7,11 @@ import sys
 from pathlib import Path
 
 from PySide6.QtCore import QTimer
+from PySide6.QtWidgets import QApplication
+
+from arapp.app.toolpaths import preview_spec
+from arapp.gui.main_window import MainWindow
+from arapp.gui.remote import warm_up
 
 
 def ensure_platform() -> None:
@@ -16,8 +21,6 @@ def ensure_platform() -> None:
 
 
 def get_app():
-    from PySide6.QtWidgets import QApplication
-
     app = QApplication.instance()
     if app is None:
         app = QApplication(sys.argv[:1])
@@ -69,8 +72,7 @@ class ScreenshotRun:
         # N frames of the stream have gone by once frame N-1 is on screen (frames the pipeline
         # was too slow for were dropped on the way, as in normal viewing)
         if self.exit_code is None and _index >= self.frames - 1:
-            if self.window.engine is not None:
-                self.window.engine.pause()
+            self.window.session.pause()
             # one more turn of the event loop so panels show this frame's numbers
             QTimer.singleShot(300, lambda: self._finish(
                 0, f"{self.frames} frames played, {self.window.frames_painted} painted"))
@@ -97,8 +99,6 @@ class ScreenshotRun:
             if not self.window.grab().save(str(self.path)):
                 self.exit_code = 2
                 self.message = f"cannot write the screenshot {self.path}"
-        from PySide6.QtWidgets import QApplication
-
         QApplication.instance().exit(self.exit_code)
 
 
@@ -113,24 +113,18 @@ def run_gui(source: str | None = None, model: str | None = None, frames: int | N
         raise ValueError("--frames needs --source (a recording, a video or a camera)")
     ensure_platform()
     app = get_app()
-    from arapp.gui.main_window import MainWindow
-
     window = MainWindow(settings=settings)
     if window.engine_kind == "process" and not source:
-        from arapp.gui.remote import warm_up
-
         warm_up()
     window.show()
     if toolpaths:
-        from arapp.gui.toolpaths import preview_spec
-
         window.set_toolpaths(preview_spec(toolpaths, printer, layer))
     if model:
         window.open_model(model)
     if source:
         window.open_source(source)
     else:
-        last = window._recent("recent_sources")
+        last = window.session.recent("recent_sources")
         if frames is None and last and Path(last[0]).is_dir():
             window.statusBar().showMessage(f"Last source: {last[0]} (File > Recent sources)", 8000)
     if frames is None:

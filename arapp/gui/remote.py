@@ -7,12 +7,13 @@ the UI thread stalls for hundreds of milliseconds on a loaded 2-core machine
 
 The child (started from a fork server that has the heavy modules imported
 already, so it starts in a fraction of a second) runs the same `Player` and
-`Processor` threads as `workers.Engine`. Finished frames, already scaled to
+`Processor` threads as `workers.Engine` (an `arapp.app.live.LiveEngine`). Finished frames, already scaled to
 the view and converted to the screen's 32-bit format, come back over a pipe;
 a receiver thread in the UI process wraps them as QImages into a
 latest-frame-wins slot and signals the UI thread, which only paints.
-Commands go the other way as small tuples (a model travels as its path plus
-control-point edits; the child loads and tessellates it itself).
+Commands go the other way as the `arapp.app.commands` dataclasses themselves
+(a model travels as its path plus control-point edits; the child loads and
+tessellates it itself).
 
 `RemoteEngine` has the interface of `workers.Engine`.
 """
@@ -20,6 +21,7 @@ control-point edits; the child loads and tessellates it itself).
 from __future__ import annotations
 
 import multiprocessing as mp
+from multiprocessing import forkserver
 import threading
 import time
 import traceback
@@ -28,12 +30,18 @@ import numpy as np
 from PySide6.QtCore import QObject, Signal
 from PySide6.QtGui import QImage
 
-from arapp.gui.slots import LatestSlot
-from arapp.gui.workers import ProcessingStage, Shown, SourceInfo
+from arapp.app.commands import Pause, Play, SetDisplaySize, SetModel, Step, Stop
+from arapp.app.live import LiveEngine, SourceInfo
+from arapp.app.processor import Shown
+from arapp.app.slots import LatestSlot
 from arapp.pipeline import FrameResult
+from tracking.camera import Camera
+from tracking.session import parse_anchors
 
-PRELOAD = ["numpy", "cv2", "arapp.pipeline", "arapp.gui.workers", "arapp.gui.sourcespec", "arapp.gui.editing",
-           "tracking.sources", "tracking.tracker", "arapp.geometry.model", "trimesh"]
+PRELOAD = ["numpy", "cv2", "arapp.pipeline", "arapp.app.live", "tracking.sources", "tracking.tracker",
+           "arapp.geometry.model", "trimesh"]
+# the model state each frame carries back (LiveEngine.state)
+STATE_KEYS = ("mesh_faces", "model_gen", "mode", "resets", "toolpaths")
 _context = None
 _context_lock = threading.Lock()
 
@@ -54,8 +62,6 @@ def warm_up() -> None:
 
     def start():
         context()
-        from multiprocessing import forkserver
-
         forkserver.ensure_running()
 
     threading.Thread(target=start, name="arapp-forkserver", daemon=True).start()
@@ -63,43 +69,41 @@ def warm_up() -> None:
 
 # Results cross the process boundary as the pipeline's own FrameResult (`image`: the full-size composite,
 # only with full_frames, else None). `extra` holds the child's view of the model: mesh_faces, model_gen,
-# mode, resets, and `toolpaths`: the print preview drawn (arapp.gui.toolpaths info dict, None before any).
+# mode, resets, and `toolpaths`: the print preview drawn (arapp.app.toolpaths info dict, None before any).
+# Commands travel as the arapp.app.commands dataclasses themselves; events come back as (event name, *args).
 
 
 # ---------------------------------------------------------------------------------------------- child
 
 
+def info_dict(info: SourceInfo) -> dict:
+    """A SourceInfo as plain data for the pipe (camera and anchors as their JSON dicts)."""
+    return {"name": info.name, "seekable": info.seekable, "frame_count": info.frame_count, "fps": info.fps,
+            "camera": info.camera.to_dict(), "live": info.live, "anchors": [a.to_dict() for a in info.anchors]}
+
+
+def info_from_dict(d: dict) -> SourceInfo:
+    return SourceInfo(name=d["name"], seekable=d["seekable"], frame_count=d["frame_count"], fps=d["fps"],
+                      camera=Camera.from_dict(d["camera"]), anchors=parse_anchors(d["anchors"]), live=d["live"])
+
+
 class _Child:
-    """Everything that runs in the child process."""
+    """Everything that runs in the child process: a LiveEngine, its events sent up the pipe."""
 
     def __init__(self, conn, spec: str, anchors_json: list, speed: float, loop: bool, playing: bool,
                  full_frames: bool, display_size):
-        from arapp.gui.workers import Player
-
         self.conn = conn
-        self.spec = spec
-        self.anchors_json = anchors_json
         self.full_frames = full_frames
         self.lock = threading.Lock()
-        self.captured, self.shown = LatestSlot(), LatestSlot()
-        self.info = None
-        self.autoplay = playing
-        self.first_ready = False
-        self.stage = ProcessingStage(display_size)
-        self.state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0, "toolpaths": None}
-        self.models: dict = {}
         self.stop = threading.Event()
-        self.player = Player(self._open, self.captured, speed=speed, loop=loop, playing=False,
-                             on_open=self._opened, on_error=self.send_error, on_end=lambda: self.send(("ended",)))
-        self.player._steps = 1
-        from arapp.gui.toolpaths import ToolpathStage
-
-        self.toolpaths = ToolpathStage(self.submit, self._toolpaths_shown, self.send_error)
-
-    def _toolpaths_shown(self, info: dict) -> None:
-        """Pipeline thread: the print preview `info` is drawn from the next frame on."""
-        self.state["toolpaths"] = info
-        self.send(("toolpaths", info))
+        self.engine = LiveEngine(spec, anchors=parse_anchors(anchors_json), speed=speed, loop=loop,
+                                 playing=playing, display_size=display_size)
+        ev = self.engine.events
+        ev.opened.connect(lambda info: self.send(("opened", info_dict(info))))
+        ev.error.connect(lambda title, message: self.send(("error", title, message)))
+        ev.ended.connect(lambda: self.send(("ended",)))
+        ev.recorded.connect(lambda folder: self.send(("recorded", folder)))
+        ev.toolpaths.connect(lambda info: self.send(("toolpaths", info)))
 
     def send(self, msg, *blobs) -> None:
         with self.lock:
@@ -110,182 +114,49 @@ class _Child:
             except (OSError, EOFError, BrokenPipeError):
                 self.stop.set()  # the UI is gone
 
-    def send_error(self, title: str, message: str) -> None:
-        self.send(("error", title, message))
-
-    def _open(self):
-        from arapp.gui.sourcespec import open_spec
-
-        return open_spec(self.spec)
-
-    def _opened(self, source) -> None:
-        from arapp.gui.workers import Processor, source_info
-        from tracking.session import parse_anchors
-
-        from arapp.gui.sourcespec import display_name
-
-        info = source_info(source, display_name(self.spec), parse_anchors(self.anchors_json))
-        if not info.anchors:
-            raise RuntimeError(f"{self.spec}: no anchors are configured; set them in the tracking panel")
-        self.info = info
-        processor = Processor(lambda: self._make_pipeline(info), self.captured, self.shown,
-                              on_ready=self._ready, on_error=self.send_error, skipped=lambda: self.player.skipped)
-        self.stage.start(processor)
-        if info.live and self.autoplay:
-            self.player.play()
-        self.send(("opened", {"name": info.name, "seekable": info.seekable, "frame_count": info.frame_count,
-                              "fps": info.fps, "camera": info.camera.to_dict(), "live": info.live,
-                              "anchors": [a.to_dict() for a in info.anchors]}))
-
-    @staticmethod
-    def _make_pipeline(info):
-        from arapp.pipeline import Pipeline
-
-        return Pipeline(info.camera, info.anchors, status_line=False)
-
-    def _ready(self) -> None:
-        if not self.first_ready:
-            self.first_ready = True
-            if self.autoplay:
-                self.player.play()
-
-    def submit(self, fn) -> None:
-        """fn(pipeline) between frames in the pipeline thread (queued until it exists); any thread."""
-        self.stage.submit(fn)
-
-    # -- commands from the UI ------------------------------------------------------------
-    def _load(self, path: str, edits: dict):
-        from arapp.gui.editing import edited_model, model_mesh
-        from arapp.pipeline import load_display_model
-
-        base = self.models.get(path)
-        if base is None:
-            base = self.models[path] = load_display_model(path)
-        model = edited_model(base, edits) if edits else base
-        model_mesh(model)  # tessellate here, in the command thread, not between frames
-        return model
-
-    def command(self, msg) -> None:
-        kind = msg[0]
-        p = self.player
-        if kind == "play":
-            self.autoplay = True
-            p.play()
-        elif kind == "pause":
-            self.autoplay = False
-            p.pause()
-        elif kind == "step":
-            self.autoplay = False
-            p.step(msg[1])
-        elif kind == "seek":
-            p.seek(msg[1])
-        elif kind == "speed":
-            p.set_speed(msg[1])
-        elif kind == "loop":
-            p.set_loop(msg[1])
-        elif kind == "display_size":
-            self.stage.set_display_size(msg[1])
-        elif kind == "reset":
-            def reset(pipe):
-                pipe.reset()
-                self.state["resets"] += 1
-
-            self.submit(reset)
-        elif kind == "mode":
-            mode = msg[1]
-
-            def set_mode(pipe):
-                pipe.set_mode(mode)
-                self.state["mode"] = mode
-
-            self.submit(set_mode)
-        elif kind == "highlight":
-            self.stage.set_highlight(msg[1])
-        elif kind == "placement":
-            placement = msg[1]
-            self.submit(lambda pipe: pipe.set_placement(placement))
-        elif kind == "model":
-            _, gen, path, edits, placement, mode = msg
-            try:
-                model = self._load(path, edits) if path else None
-            except Exception as exc:  # noqa: BLE001 - the UI shows it
-                self.send_error("Cannot open the model", str(exc))
-                return
-
-            def set_model(pipe):
-                pipe.set_mode(mode)
-                pipe.set_model(model, placement)
-                self.state.update(mode=mode, model_gen=gen,
-                                  mesh_faces=0 if pipe.mesh is None else int(len(pipe.mesh.faces)))
-
-            self.submit(set_model)
-        elif kind == "toolpaths":
-            self.toolpaths.request(msg[1], gen=msg[2])
-        elif kind == "record_start":
-            from arapp.gui import recording
-
-            try:
-                p.recorder = recording.start(msg[1], self.info, p.source)
-            except Exception as exc:  # noqa: BLE001
-                self.send_error("Cannot record", str(exc))
-                return
-            self.send(("recording", str(msg[1])))
-        elif kind == "record_stop":
-            rec, p.recorder = p.recorder, None
-            if rec is not None:
-                try:
-                    rec.close()
-                except Exception as exc:  # noqa: BLE001
-                    self.send_error("Recording failed", str(exc))
-                    return
-                self.send(("recorded", str(rec.folder)))
-        elif kind == "stop":
-            self.stop.set()
-
     def command_loop(self) -> None:
         while not self.stop.is_set():
             try:
-                msg = self.conn.recv()
+                command = self.conn.recv()
             except (EOFError, OSError):
                 break
+            if isinstance(command, Stop):
+                break
             try:
-                self.command(msg)
-            except Exception as exc:  # noqa: BLE001
-                self.send_error("Cannot apply the change", str(exc) or type(exc).__name__)
+                self.engine.apply(command)
+            except Exception as exc:  # noqa: BLE001 - a bad setting is told to the user
+                self.send(("error", "Cannot apply the change", str(exc) or type(exc).__name__))
         self.stop.set()
-        self.shown.wake()
+        self.engine.shown.wake()
+
+    def send_frame(self, shown) -> None:
+        r = shown.result
+        bgra = shown.display
+        meta = {"index": int(r.index), "t": float(r.t), "state": r.state, "markers": int(r.markers),
+                "inliers": int(r.inliers), "ms_track": float(r.ms_track), "ms_render": float(r.ms_render),
+                "pose": None if r.world_from_camera is None else np.asarray(r.world_from_camera).tolist(),
+                "captured_at": shown.captured_at, "processed_at": shown.processed_at,
+                "dropped": shown.dropped_capture, "w": bgra.shape[1], "h": bgra.shape[0],
+                "full": self.full_frames, **{k: r.extra[k] for k in STATE_KEYS}}
+        blobs = [memoryview(np.ascontiguousarray(bgra)).cast("B")]
+        if self.full_frames:
+            for img in (r.image, shown.frame):
+                meta.setdefault("full_shape", list(img.shape))
+                blobs.append(memoryview(np.ascontiguousarray(img)).cast("B"))
+        self.send(("frame", meta), *blobs)
 
     def run(self) -> None:
         threading.Thread(target=self.command_loop, name="arapp-commands", daemon=True).start()
-        self.player.start()
+        engine = self.engine
+        engine.start()
         while not self.stop.is_set():
-            shown = self.shown.take(timeout=0.5)
+            shown = engine.take(timeout=0.5)
             if shown is None:
-                if not self.player.is_alive() and not self.stage.is_alive():
-                    if self.captured.peek() is None:
-                        break
+                if not engine.running and engine.captured.peek() is None:
+                    break
                 continue
-            r = shown.result
-            bgra = shown.qimage._keep
-            meta = {"index": int(r.index), "t": float(r.t), "state": r.state, "markers": int(r.markers),
-                    "inliers": int(r.inliers), "ms_track": float(r.ms_track), "ms_render": float(r.ms_render),
-                    "pose": None if r.world_from_camera is None else np.asarray(r.world_from_camera).tolist(),
-                    "captured_at": shown.captured_at, "processed_at": shown.processed_at,
-                    "dropped": shown.dropped_capture, "w": bgra.shape[1], "h": bgra.shape[0],
-                    "full": self.full_frames, **self.state}
-            blobs = [memoryview(np.ascontiguousarray(bgra)).cast("B")]
-            if self.full_frames:
-                for img in (r.image, shown.frame):
-                    meta.setdefault("full_shape", list(img.shape))
-                    blobs.append(memoryview(np.ascontiguousarray(img)).cast("B"))
-            self.send(("frame", meta), *blobs)
-        self.player.stop()
-        self.toolpaths.stop()
-        processor = self.stage.current()
-        if processor is not None:
-            processor.stop()
-            processor.join(5.0)
-        self.player.join(5.0)
+            self.send_frame(shown)
+        engine.stop(wait=10.0)
 
 
 def child_main(conn, spec, anchors_json, speed, loop, playing, full_frames, display_size) -> None:
@@ -304,15 +175,10 @@ def child_main(conn, spec, anchors_json, speed, loop, playing, full_frames, disp
 # ------------------------------------------------------------------------------------------------ UI
 
 
-class _PlayerView:
-    """What the window reads of the player (`recorder`) in the remote case."""
-
-    recorder = None
-
-
 class RemoteEngine(QObject):
-    """`workers.Engine`'s interface, with the pipeline in a child process. Signals are delivered on the
-    UI thread. Extra: recorded(folder) after a recording of a live source is finished."""
+    """`workers.Engine`'s interface, with the LiveEngine in a child process. Signals are delivered on the
+    UI thread: opened(SourceInfo), frame_ready(), error(title, message), ended(), recorded(folder),
+    toolpaths_shown(info)."""
 
     opened = Signal(object)
     frame_ready = Signal()
@@ -334,11 +200,11 @@ class RemoteEngine(QObject):
         self._send_lock = threading.Lock()
         self._stopping = False
         self.display_size = None
-        self.player = _PlayerView()
         self.process = None
         self.conn = None
         self._receiver = None
-        self._first_ready = False
+        self._events = {"opened": self._opened, "error": self.error.emit, "ended": self._ended,
+                        "recorded": self.recorded.emit, "toolpaths": self.toolpaths_shown.emit}
 
     # -- lifecycle ---------------------------------------------------------------------
     def start(self) -> None:
@@ -367,21 +233,10 @@ class RemoteEngine(QObject):
                 msg = conn.recv()
             except (EOFError, OSError):
                 break
-            kind = msg[0]
-            if kind == "frame":
+            if msg[0] == "frame":
                 self._frame(conn, msg[1])
-            elif kind == "opened":
-                self.info = self._info(msg[1])
-                self.opened.emit(self.info)
-            elif kind == "error":
-                self.error.emit(msg[1], msg[2])
-            elif kind == "ended":
-                self._playing = False
-                self.ended.emit()
-            elif kind == "recorded":
-                self.recorded.emit(msg[1])
-            elif kind == "toolpaths":
-                self.toolpaths_shown.emit(msg[1])
+            else:
+                self._events[msg[0]](*msg[1:])
         if not self._stopping:
             self.process.join(2.0)
             code = self.process.exitcode
@@ -389,12 +244,13 @@ class RemoteEngine(QObject):
                 self.error.emit("The tracking process stopped",
                                 f"the process running capture, tracking and rendering ended with code {code}")
 
-    def _info(self, d: dict) -> SourceInfo:
-        from tracking.camera import Camera
-        from tracking.session import parse_anchors
+    def _opened(self, d: dict) -> None:
+        self.info = info_from_dict(d)
+        self.opened.emit(self.info)
 
-        return SourceInfo(name=d["name"], seekable=d["seekable"], frame_count=d["frame_count"], fps=d["fps"],
-                          camera=Camera.from_dict(d["camera"]), anchors=parse_anchors(d["anchors"]), live=d["live"])
+    def _ended(self) -> None:
+        self._playing = False
+        self.ended.emit()
 
     def _frame(self, conn, meta: dict) -> None:
         data = conn.recv_bytes()
@@ -409,28 +265,36 @@ class RemoteEngine(QObject):
             image = np.frombuffer(full[0], np.uint8).reshape(shape)
             frame = np.frombuffer(full[1], np.uint8).reshape(shape)
         pose = None if meta["pose"] is None else np.asarray(meta["pose"], float)
-        extra = {k: meta[k] for k in ("mesh_faces", "model_gen", "mode", "resets", "toolpaths")}
+        extra = {k: meta[k] for k in STATE_KEYS}
         result = FrameResult(meta["index"], meta["t"], pose, meta["state"], meta["markers"], meta["inliers"],
-                              meta["ms_track"], meta["ms_render"], image, extra)
-        self.shown.put(Shown(result, q, frame, meta["captured_at"], meta["processed_at"],
-                             dropped_capture=meta["dropped"]))
-        self._first_ready = True
+                             meta["ms_track"], meta["ms_render"], image, extra)
+        self.shown.put(Shown(result, bgra, frame, meta["captured_at"], meta["processed_at"],
+                             dropped_capture=meta["dropped"], qimage=q))
         if not self._notify_pending.is_set():
             self._notify_pending.set()
             self.frame_ready.emit()
 
-    def _send(self, *msg) -> None:
+    def send(self, command) -> None:
+        """Send an arapp.app.commands command to the child (a model as its path and edits only)."""
+        if isinstance(command, SetModel):
+            command = command.for_transfer()
+        elif isinstance(command, SetDisplaySize):
+            self.display_size = command.size  # also the child's start value, when it is not started yet
+        if isinstance(command, Play):
+            self._playing = True
+        elif isinstance(command, (Pause, Step)):
+            self._playing = False
         if self.conn is None:
             return
         with self._send_lock:
             try:
-                self.conn.send(msg)
+                self.conn.send(command)
             except (OSError, BrokenPipeError):
                 pass  # the child is gone; the receiver reports why
 
     def stop(self, wait: float = 0.0) -> None:
         self._stopping = True
-        self._send("stop")
+        self.send(Stop())
         if wait > 0 and self.process is not None:
             deadline = time.perf_counter() + wait
             if self._receiver is not None:
@@ -452,64 +316,6 @@ class RemoteEngine(QObject):
         if shown is not None:
             shown.dropped_paint = self.shown.dropped
         return shown
-
-    def set_display_size(self, width: int, height: int) -> None:
-        self.display_size = (int(width), int(height))
-        self._send("display_size", self.display_size)
-
-    def set_model(self, gen: int, path: str | None, edits: dict, placement: dict | None, mode: str,
-                  model=None) -> None:
-        """Show the model file at `path` with control-point `edits` applied (the child loads and tessellates
-        it; `model`, the UI's own copy, stays here)."""
-        self._send("model", gen, path, dict(edits), placement, mode)
-
-    def set_placement(self, placement: dict) -> None:
-        self._send("placement", dict(placement))
-
-    def set_highlight(self, point: tuple[int, int, int] | None) -> None:
-        """Ring control point (surface, i, j) of the shown model on screen; None: no ring."""
-        self._send("highlight", None if point is None else tuple(int(x) for x in point))
-
-    def set_mode(self, mode: str) -> None:
-        self._send("mode", mode)
-
-    def set_toolpaths(self, spec: dict | None, gen: int = 0) -> None:
-        """Show the print preview `spec` (arapp.gui.toolpaths.preview_spec: G-code path, printer profile,
-        layer, layer being printed) on the bed; None clears it. The child parses and builds the line sets;
-        `toolpaths_shown(info)` follows once they are drawn."""
-        self._send("toolpaths", None if spec is None else dict(spec), int(gen))
-
-    def reset(self) -> None:
-        self._send("reset")
-
-    def record_start(self, folder) -> None:
-        self._send("record_start", str(folder))
-
-    def record_stop(self) -> None:
-        self._send("record_stop")
-
-    def play(self) -> None:
-        self._playing = True
-        self._send("play")
-
-    def pause(self) -> None:
-        self._playing = False
-        self._send("pause")
-
-    def step(self, n: int = 1) -> None:
-        self._playing = False
-        self._send("step", n)
-
-    def seek(self, frame: int) -> None:
-        self._send("seek", int(frame))
-
-    def set_speed(self, speed: float) -> None:
-        if not speed > 0:
-            raise ValueError(f"replay speed must be positive, got {speed}")
-        self._send("speed", float(speed))
-
-    def set_loop(self, loop: bool) -> None:
-        self._send("loop", bool(loop))
 
     @property
     def playing(self) -> bool:

@@ -17,7 +17,7 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
 )
 
-from arapp.gui import sourcespec
+from arapp.app import sourcespec
 from arapp.gui.tasks import Task
 
 

@@ -129,3 +129,20 @@ class LatestTask:
             finally:
                 with self._cond:
                     self._busy = False
+
+
+class QtRunner:
+    """The GUI's runner for the app model (arapp.app.runner): jobs in worker threads, results on the UI
+    thread (dropped once `owner` is deleted)."""
+
+    def __init__(self, owner: QObject | None = None):
+        self.owner = owner
+
+    def run(self, fn: Callable, *args, done=None, failed=None, name: str = "arapp-task") -> Task:
+        return Task(fn, *args, done=done, failed=failed, name=name, owner=self.owner).start()
+
+    def latest(self, fn: Callable[[Any], Any], done, failed=None, name: str = "arapp-latest") -> LatestTask:
+        return LatestTask(fn, done, failed, name=name, owner=self.owner)
+
+    def post(self, fn: Callable[[Any], None], value=None) -> None:
+        on_ui(fn, value, self.owner)

@@ -23,6 +23,8 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from arapp.placement import Placement
+
 MODEL_FILTER = ("Models (*.json *.stl *.obj *.ply *.3mf *.glb);;NURBS models (*.json);;"
                 "Meshes (*.stl *.obj *.ply *.3mf *.glb)")
 MODES = ("shaded", "wireframe", "isolines", "translucent")
@@ -56,14 +58,14 @@ def _spin(lo: float, hi: float, step: float, decimals: int, suffix: str = "") ->
 class ModelPanel(QWidget):
     """Widgets only; the main window loads models and talks to the pipeline.
 
-    Signals: model_chosen(path), placement_changed(dict with size_mm, offset, rotation_deg),
+    Signals: model_chosen(path), placement_changed(arapp.placement.Placement),
     mode_changed(str), point_selected(surface, i, j), point_edited(surface, i, j, (x, y, z), weight),
     print_requested().
     """
 
     model_chosen = Signal(str)
     open_requested = Signal()
-    placement_changed = Signal(dict)
+    placement_changed = Signal(object)
     mode_changed = Signal(str)
     point_selected = Signal(int, int, int)
     point_edited = Signal(int, int, int, tuple, float)
@@ -143,7 +145,7 @@ class ModelPanel(QWidget):
         self._quiet = False
         self._surfaces = []
         self._tilt = (0.0, 0.0)
-        self.set_placement({"size_mm": 50.0, "offset": (0.0, 0.0, 0.0), "rotation_deg": (0.0, 0.0, 0.0)})
+        self.set_placement(Placement())
 
     # -- library -----------------------------------------------------------------------
     def set_library(self, paths: list[Path]) -> None:
@@ -187,11 +189,8 @@ class ModelPanel(QWidget):
         """The edited surfaces (same shapes), so the fields show the values in force."""
         self._surfaces = list(surfaces)
 
-    def set_placement(self, placement) -> None:
-        """placement: a dict as `display_placement` gives (size_mm, offset, rotation_deg as 3 angles)."""
-        from arapp.placement import placement_from_any
-
-        p = placement_from_any(placement)
+    def set_placement(self, p: Placement) -> None:
+        """Show a placement (size_mm, offset mm, rotation_deg: the turn about z is edited here)."""
         self._quiet = True
         self.size.setValue(p.size_mm)
         for s, v in zip(self.offset, p.offset):
@@ -200,9 +199,9 @@ class ModelPanel(QWidget):
         self.rotation.setValue(float(p.rotation_deg[2]))
         self._quiet = False
 
-    def placement(self) -> dict:
-        return {"size_mm": self.size.value(), "offset": tuple(s.value() for s in self.offset),
-                "rotation_deg": (*self._tilt, self.rotation.value())}
+    def placement(self) -> Placement:
+        return Placement(self.size.value(), tuple(s.value() for s in self.offset),
+                         (*self._tilt, self.rotation.value()))
 
     def _placement_edited(self) -> None:
         if not self._quiet:

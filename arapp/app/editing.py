@@ -1,4 +1,4 @@
-"""Model helpers for the GUI that run in worker threads: control-point edits and library thumbnails."""
+"""Model helpers that run in worker threads: control-point edits, display meshes and library thumbnails."""
 
 from __future__ import annotations
 
@@ -7,15 +7,15 @@ from pathlib import Path
 
 import numpy as np
 
+from arapp.app.thumbnails import render_thumbnail
+from arapp.geometry import NurbsSurface, load_model
+from arapp.placement import Placement, placement_from_any
 
-def display_placement(model) -> dict:
-    """The model's placement as the dict `arapp.placement.placement_from_any` takes:
-    size_mm, offset (x, y, z mm), rotation_deg (about x, y, z; the GUI edits the turn about z, the anchor normal)."""
-    from arapp.placement import placement_from_any
 
-    p = placement_from_any(getattr(model, "placement", None))
-    return {"size_mm": float(p.size_mm), "offset": tuple(float(x) for x in p.offset),
-            "rotation_deg": tuple(float(x) for x in p.rotation_deg)}
+def display_placement(model) -> Placement:
+    """The model's own placement (size_mm, offset x, y, z mm, rotation_deg about x, y, z; the GUI edits the
+    turn about z, the anchor normal), or the default one for a model without."""
+    return placement_from_any(getattr(model, "placement", None))
 
 
 def edited_model(model, edits: dict):
@@ -24,8 +24,6 @@ def edited_model(model, edits: dict):
     The surfaces are rebuilt through NurbsSurface, so an edit that makes the
     surface invalid (a vanishing denominator) raises its ValueError here.
     """
-    from arapp.geometry import NurbsSurface
-
     surfaces = list(model.surfaces)
     by_surface: dict[int, list] = {}
     for (k, i, j), value in edits.items():
@@ -56,13 +54,9 @@ def model_mesh(model):
 _THUMBS: dict = {}  # (path, mtime, size) -> image; thumbnails are made once per process
 
 
-def library_thumbnails(paths: list[Path], each, owner=None, size: int = 72) -> int:
-    """Render a thumbnail per model file and hand (path, bgr image) to each() on the UI thread (unless `owner`
-    is gone by then); skip files that do not load (opening one shows its error)."""
-    from arapp.geometry import load_model
-    from arapp.gui.tasks import on_ui
-    from arapp.gui.thumbnails import render_thumbnail
-
+def library_thumbnails(paths: list[Path], each, size: int = 72) -> int:
+    """Render a thumbnail per model file and hand (path, bgr image) to each(), in this thread, as each is
+    done (the GUI forwards them to its UI thread); skip files that do not load (opening one shows its error)."""
     done = 0
     for path in paths:
         try:
@@ -75,6 +69,6 @@ def library_thumbnails(paths: list[Path], each, owner=None, size: int = 72) -> i
                 image = _THUMBS[key] = render_thumbnail(mesh.vertices, mesh.faces, size, color=color)
         except (ValueError, OSError, RuntimeError):
             continue
-        on_ui(each, (str(path), image), owner)
+        each((str(path), image))
         done += 1
     return done

@@ -1,4 +1,4 @@
-"""Source specs as the GUI uses them, opened through tracking.sources.
+"""Source specs as the app uses them, opened through tracking.sources; which sources are live.
 
 Specs: a recording folder (or `file:FOLDER`), a video `file:VIDEO` with its
 calibration as `file:VIDEO?calibration=CAM.yaml`, `v4l2:N`, `v4l2:/dev/videoN`,
@@ -8,6 +8,25 @@ calibration as `file:VIDEO?calibration=CAM.yaml`, `v4l2:N`, `v4l2:/dev/videoN`,
 from __future__ import annotations
 
 from pathlib import Path
+
+from tracking import sources
+
+# source kinds that deliver at their own pace and cannot seek (read by `is_live` when a source does
+# not say so itself with a `live` attribute)
+LIVE_KINDS = ("v4l2", "depthai")
+
+
+def is_live(source) -> bool:
+    """Cameras deliver at their own pace and cannot seek; files and recordings are paced by the player."""
+    live = getattr(source, "live", None)
+    if isinstance(live, bool):
+        return live
+    return getattr(source, "kind", "") in LIVE_KINDS
+
+
+def is_seekable(source) -> bool:
+    """A recording or video with a known frame count and a `seek` method."""
+    return not is_live(source) and hasattr(source, "seek") and int(getattr(source, "frame_count", 0) or 0) > 0
 
 
 def split_calibration(spec: str) -> tuple[str, str | None]:
@@ -42,9 +61,7 @@ def display_name(spec: str) -> str:
 
 
 def open_spec(spec: str):
-    """Open the source a spec names. Recordings are read as fast as asked (the GUI paces them itself)."""
-    from tracking import sources
-
+    """Open the source a spec names. Recordings are read as fast as asked (the player paces them itself)."""
     base, calib = split_calibration(spec)
     folder = recording_folder(base)
     if folder is not None:
@@ -54,8 +71,6 @@ def open_spec(spec: str):
 
 def list_devices() -> list[tuple[str, str]]:
     """(spec, description) of attached cameras (V4L2 and DepthAI); may take a second (DepthAI looks on USB)."""
-    from tracking import sources
-
     out = []
     for d in sources.list_v4l2():
         out.append((d["spec"], f"V4L2 {d.get('name', '?')} ({d.get('device', '')})"))

@@ -1,4 +1,4 @@
-"""The print dialog's use of the printer links (arapp.printing.link): one job API for serial and OctoPrint.
+"""The app's use of the printer links (arapp.printing.link): one job API for serial and OctoPrint.
 
 A `PrintJob` runs `connect()` and `print_gcode()` of a `SerialPrinter` or an
 `OctoPrintLink` in its own thread and reports `PrintEvent`s through a callback
@@ -12,6 +12,12 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
+
+from serial.tools import list_ports
+
+from arapp.printing.link import LinkLost, PrinterHalted
+from arapp.printing.link.octoprint import OctoPrintLink, load_api_key
+from arapp.printing.link.serial_link import SerialPrinter
 
 
 @dataclass
@@ -47,10 +53,6 @@ class PrintEvent:
 
 def serial_ports() -> list[str]:
     """Serial devices that look like printers (USB/ACM first)."""
-    try:
-        from serial.tools import list_ports
-    except ImportError:
-        return []
     ports = [p.device for p in list_ports.comports()]
     return sorted(ports, key=lambda d: (not ("USB" in d or "ACM" in d), d))
 
@@ -105,15 +107,11 @@ def make_link(target, profile=None, job_path=None):
     """The link object for a target (not connected yet). Raises ValueError for a target the user left
     incomplete, ApiKeyError/OSError for an unreadable key file."""
     if isinstance(target, OctoPrintTarget):
-        from arapp.printing.link.octoprint import OctoPrintLink, load_api_key
-
         if not target.url:
             raise ValueError("give the OctoPrint URL (e.g. http://octopi.local) and the API key file")
         if not target.api_key_file:
             raise ValueError("give the file holding OctoPrint's API key (Settings > API in OctoPrint)")
         return OctoPrintLink(target.url, load_api_key(target.api_key_file), job_path=job_path)
-    from arapp.printing.link.serial_link import SerialPrinter
-
     if not target.port:
         raise ValueError("choose the printer's serial port (e.g. /dev/ttyUSB0), or use OctoPrint")
     bed_height = getattr(getattr(profile, "bed", None), "height", None)
@@ -183,15 +181,11 @@ class PrintJob:
         # print_gcode watches the event (both links); the serial link's own cancel() only sets a flag and
         # wakes it at once. OctoPrint's is an HTTP request that print_gcode makes itself on the event.
         self._cancel.set()
-        from arapp.printing.link.serial_link import SerialPrinter
-
         if self._connected.is_set() and isinstance(self.link, SerialPrinter):
             self.link.cancel()
 
     # -- the job thread ---------------------------------------------------------------------
     def _run(self) -> None:
-        from arapp.printing.link import LinkLost, PrinterHalted
-
         where = getattr(self.link, "url", None) or getattr(self.link, "port", "the printer")
         self.callback(PrintEvent(text=f"Connecting to {where}..."))
         try:

@@ -11,7 +11,7 @@ rule); it takes precedence over `layer`.
 `ToolpathStage` parses the G-code (once per file version), builds the line
 sets in its own thread (newest request wins, so a layer slider dragged fast
 never queues work) and hands them to the pipeline thread between frames. The
-bed anchor is the session's first anchor (PRINTER_PROFILE.md).
+bed anchor is the session's first anchor (docs/printer-profile.md).
 """
 
 from __future__ import annotations
@@ -23,6 +23,10 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
+
+from arapp.printing import load_profile
+from arapp.printing.gcode import parse_gcode
+from arapp.toolpath_overlay import OUT_OF_BED_COLOUR, out_of_bed, toolpath_line_sets, world_from_bed
 
 
 def preview_spec(gcode: str, printer: str | None, layer: int | None = None, current: int | None = None,
@@ -56,8 +60,6 @@ class PreviewSummary:
 
 def summarize(layers, bed) -> PreviewSummary:
     """Summary of parsed G-code layers (arapp.printing.gcode.parse_gcode) on a bed (profile.bed)."""
-    from arapp.toolpath_overlay import out_of_bed
-
     outside = []
     for gl in layers:
         for extruding, kinds in ((True, ("perimeter", "infill", "skirt", "other")), (False, ("travel",))):
@@ -85,8 +87,6 @@ class ToolpathBuilder:
         return (st.st_mtime_ns, st.st_size)
 
     def layers(self, gcode_path: str) -> list:
-        from arapp.printing.gcode import parse_gcode
-
         path = Path(gcode_path)
         if not path.is_file():
             raise FileNotFoundError(f"print preview: the G-code {path} does not exist; slice the model again")
@@ -101,8 +101,6 @@ class ToolpathBuilder:
         return hit[1]
 
     def profile(self, printer: str | None):
-        from arapp.printing import load_profile
-
         key = str(printer)
         p = Path(printer) if printer else None
         version = self._version(p) if p is not None and p.is_file() else ()
@@ -111,7 +109,7 @@ class ToolpathBuilder:
             profile = load_profile(printer)
             if profile.bed_from_anchor is None:
                 raise ValueError(f"printer profile {profile.source} has no bed_anchor; add one with its "
-                                 "bed_from_anchor (PRINTER_PROFILE.md, or 'arapp bed-anchor') so the toolpaths "
+                                 "bed_from_anchor (docs/printer-profile.md, or 'arapp printer bed-anchor') so the toolpaths "
                                  "can be placed on the bed")
             hit = self._profiles[key] = (version, profile)
         return hit[1]
@@ -119,8 +117,6 @@ class ToolpathBuilder:
     def build(self, spec: dict) -> tuple[list, np.ndarray, dict]:
         """(line_sets in bed mm, bed_from_anchor_mm, info) for a spec. info: gen, layers, layer, current,
         outside (bool: moves drawn red)."""
-        from arapp.toolpath_overlay import OUT_OF_BED_COLOUR, toolpath_line_sets
-
         layers = self.layers(spec["gcode"])
         profile = self.profile(spec.get("printer"))
         bed = (profile.bed.width, profile.bed.depth, profile.bed.height)
@@ -194,8 +190,6 @@ class ToolpathStage:
             self.submit(lambda pipe, s=sets, b=bed_from_anchor, i=info: self._apply(pipe, s, b, i))
 
     def _apply(self, pipe, sets, bed_from_anchor, info) -> None:
-        from arapp.toolpath_overlay import world_from_bed
-
         pipe.set_toolpaths(sets, world_from_bed(pipe.anchors[0].world_from_anchor, bed_from_anchor))
         self.on_info(info)
 

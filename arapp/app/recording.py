@@ -1,4 +1,4 @@
-"""Recording a live source from the GUI into a new `arapp-recording/1` folder (tracking.recorder writes it).
+"""Recording a live source from the app into a new `arapp-recording/1` folder (tracking.recorder writes it).
 
 Frames are handed over from the capture thread to a writer thread through a
 bounded queue, so encoding never slows capture; if the disk cannot keep up,
@@ -11,6 +11,8 @@ import queue
 import threading
 import time
 from pathlib import Path
+
+from tracking.recorder import RecordingWriter
 
 
 def new_recording_folder(root: str | Path = "recordings") -> Path:
@@ -30,8 +32,6 @@ class GuiRecorder:
 
     def __init__(self, folder: Path, camera, fps: float, anchors: list, source: dict | None = None,
                  max_queue: int = 90):
-        from tracking.recorder import RecordingWriter
-
         self.folder = Path(folder)
         self.writer = RecordingWriter(self.folder, camera, fps if fps > 0 else 30.0, anchors=anchors,
                                       source=source or {"kind": "gui"})

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from tracking.printables import write_sheet
+from tracking.session import AnchorSpec, parse_anchors
+
 
 def sheet_name(index: int, spec) -> str:
     """File stem for anchor `index`, e.g. anchor0_aruco_board_DICT_4X4_50."""
@@ -18,9 +21,6 @@ def sheet_name(index: int, spec) -> str:
 
 def save_sheets(anchors, folder: str | Path, dpi: float = 300.0, page: str = "A4") -> list[Path]:
     """Write the sheets of `anchors` (AnchorSpecs or session.json blocks) into `folder`; return the files."""
-    from tracking.printables import write_sheet
-    from tracking.session import AnchorSpec, parse_anchors
-
     specs = anchors if anchors and isinstance(anchors[0], AnchorSpec) else parse_anchors(list(anchors))
     out: list[Path] = []
     for k, spec in enumerate(specs):

@@ -1,0 +1,254 @@
+"""One print of the model as shown, without widgets: printable solid -> slice -> preview on the bed -> print.
+
+`PrintSession` holds what the print dialog shows and does: the placed
+solid, the slice result and its G-code (a copy under `work_dir` that the
+preview and the printer job read), the print preview request, and the
+running `PrintJob` with its last progress. Slow work goes through the
+session's runner (arapp.app.runner); print events come from the link's
+thread and are posted to the runner's thread. Sizes in millimetres.
+
+Events: solid_ready(solid), slice_progress(fraction), sliced(result),
+slice_failed(exception, cancelled), preview_changed(spec | None),
+preview_drawn(info) (the live view shows the preview), print_event(PrintEvent), error(title, message).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+from arapp.app.events import Events
+from arapp.app.printlink import PrintEvent, start_job
+from arapp.app.runner import ImmediateRunner
+from arapp.app.toolpaths import preview_spec, summarize
+from arapp.placement import Placement, placement_from_any
+from arapp.printing import SliceCancelled, load_profile, placed_solid, slice_mesh
+from arapp.printing.gcode import parse_gcode
+
+KEEP_SLICES = 10
+
+
+def prune_slices(folder: Path, keep: int = KEEP_SLICES) -> None:
+    """Delete all but the newest `keep` sliced G-code files in `folder` that no print job refers to (a file
+    with a .printjob.json beside it may be needed to resume a print, so it stays)."""
+    loose = [p for p in folder.glob("*.gcode") if not p.with_suffix(".printjob.json").exists()]
+    loose.sort(key=lambda p: p.stat().st_mtime, reverse=True)
+    for p in loose[keep:]:
+        try:
+            p.unlink()
+        except OSError:
+            pass  # in use or already gone: harmless, tried again next time
+
+
+def default_work_dir() -> Path:
+    return Path.home() / ".arapp" / "print-jobs"
+
+
+def slice_job(model, matrix, settings, profile, profile_name: str, job_gcode: Path, progress, cancel):
+    """Worker thread: the placed solid sliced; the G-code written to `job_gcode` (the copy the preview
+    and the printer job read) with its summary. Returns (result, gcode path, summary, profile, name)."""
+    solid = placed_solid(model, matrix, profile=profile)
+    result = slice_mesh(solid, settings, profile, progress=progress, cancel=cancel)
+    job_gcode.parent.mkdir(parents=True, exist_ok=True)
+    job_gcode.write_text(result.gcode)
+    prune_slices(job_gcode.parent)
+    summary = summarize(parse_gcode(result.gcode), profile.bed)
+    return result, str(job_gcode), summary, profile, profile_name
+
+
+class PrintSession:
+    """Slice and print `model` (an arapp.geometry Model with edits applied) at `placement` (as shown)."""
+
+    def __init__(self, model, placement: Placement | None, runner=None, work_dir=None):
+        self.model = model
+        self.placement = placement_from_any(placement, getattr(model, "placement", None))
+        self.run = runner or ImmediateRunner()
+        self.work_dir = Path(work_dir) if work_dir is not None else default_work_dir()
+        self.events = Events("solid_ready", "slice_progress", "sliced", "slice_failed", "preview_changed",
+                             "preview_drawn", "print_event", "error")
+        self.solid = None
+        self.result = None  # arapp.printing SliceResult
+        self.gcode_path: str | None = None  # where the user saved the G-code
+        self.job_gcode_path: str | None = None
+        self.summary = None  # arapp.app.toolpaths.PreviewSummary of the sliced G-code
+        self.profile = None  # the PrinterProfile sliced for
+        self.sliced_profile: str | None = None  # its name or path
+        self.job = None  # arapp.app.printlink.PrintJob while printing
+        self.current_layer = -1  # the layer being printed, from the link's reports
+        self.last_progress = None
+        self.preview_on = False
+        self.preview_layer: int | None = None  # None: all layers
+        self.preview_gen = 0
+        self.preview_spec: dict | None = None
+        self._slice_task = None
+
+    def fail(self, title: str, exc: BaseException) -> None:
+        self.events.error.emit(title, str(exc) or type(exc).__name__)
+
+    # -- the printable solid -------------------------------------------------------------
+    def model_to_placement_mm(self):
+        """4x4 from model units to the anchor's placement frame in millimetres, exactly as displayed."""
+        self.model.placement = self.placement
+        return self.model.placement_matrix("mm")
+
+    def make_solid(self) -> None:
+        self.run.run(placed_solid, self.model, self.model_to_placement_mm(), done=self._solid_done,
+                     failed=lambda e: self.fail("Cannot make a printable solid", e), name="arapp-solid")
+
+    def _solid_done(self, solid) -> None:
+        self.solid = solid
+        self.events.solid_ready.emit(solid)
+
+    # -- slicing -------------------------------------------------------------------------
+    @property
+    def slicing(self) -> bool:
+        return self._slice_task is not None and self._slice_task.running
+
+    def slice(self, settings, profile_name: str) -> bool:
+        """Slice with `settings` (arapp.printing.SliceSettings) for the printer profile `profile_name` (a
+        shipped name or a file); False (reported) when the profile cannot be read."""
+        try:
+            profile = load_profile(profile_name)
+        except (ValueError, OSError) as exc:
+            self.fail("Cannot slice", exc)
+            return False
+        self.result = None
+        stem = "".join(c if c.isalnum() or c in "-_" else "_" for c in str(getattr(self.model, "name", "model")))
+        job_gcode = self.work_dir / f"{stem}-{time.strftime('%Y%m%d-%H%M%S')}.gcode"
+        cancel = threading.Event()
+        last = [0.0]
+
+        def progress(f):
+            now = time.perf_counter()
+            if now - last[0] > 0.05 or f >= 1.0:  # at most 20 updates a second
+                last[0] = now
+                self.run.post(self.events.slice_progress.emit, f)
+
+        self._slice_task = self.run.run(slice_job, self.model, self.model_to_placement_mm(), settings, profile,
+                                        str(profile_name), job_gcode, progress, cancel, done=self._slice_done,
+                                        failed=self._slice_failed, name="arapp-slice")
+        if self._slice_task is not None:
+            self._slice_task.cancel = cancel
+        return True
+
+    def cancel_slice(self) -> None:
+        if self._slice_task is not None:
+            self._slice_task.cancel.set()
+
+    def _slice_done(self, done) -> None:
+        self.result, self.job_gcode_path, self.summary, self.profile, self.sliced_profile = done
+        self.events.sliced.emit(self.result)
+        if self.preview_on:
+            self.emit_preview()
+
+    def _slice_failed(self, exc: BaseException) -> None:
+        cancelled = isinstance(exc, SliceCancelled)
+        self.events.slice_failed.emit(exc, cancelled)
+        if not cancelled:
+            self.fail("Slicing failed", exc)
+
+    def save_gcode(self, path: str) -> str | None:
+        """Write the sliced G-code to `path`; None (reported) when it cannot be written or nothing is sliced."""
+        if self.result is None or not path:
+            return None
+        try:
+            Path(path).write_text(self.result.gcode)
+        except OSError as exc:
+            self.fail("Cannot save the G-code", exc)
+            return None
+        self.gcode_path = str(path)
+        return self.gcode_path
+
+    # -- the print preview on the bed ------------------------------------------------------
+    @property
+    def preview_possible(self) -> bool:
+        """Sliced for a profile with a bed anchor (docs/printer-profile.md): the toolpaths can be placed."""
+        return (self.summary is not None and self.summary.layers > 0 and self.profile is not None
+                and self.profile.bed_from_anchor is not None)
+
+    def set_preview(self, on: bool, layer: int | None = None) -> None:
+        """Show (or hide) the toolpaths on the bed, up to `layer` (0-based; None: all layers)."""
+        self.preview_on, self.preview_layer = bool(on), layer
+        if on:
+            self.emit_preview()
+        else:
+            self._set_preview(None)
+
+    def emit_preview(self) -> None:
+        if self.job_gcode_path is None:
+            return
+        current = self.current_layer if (self.job is not None and self.current_layer >= 0) else None
+        self._set_preview(preview_spec(self.job_gcode_path, self.sliced_profile, self.preview_layer, current))
+
+    def _set_preview(self, spec: dict | None) -> None:
+        self.preview_gen += 1
+        if spec is not None:
+            spec["gen"] = self.preview_gen
+        self.preview_spec = spec
+        self.events.preview_changed.emit(spec)
+
+    def preview_shown(self, info: dict) -> None:
+        """The live view drew the preview `info` (arapp.app.toolpaths); the session tells us."""
+        self.events.preview_drawn.emit(info)
+
+    # -- printing --------------------------------------------------------------------------
+    @property
+    def printing(self) -> bool:
+        return self.job is not None
+
+    def start_print(self, target, profile_name: str) -> bool:
+        """Send the sliced G-code to `target` (arapp.app.printlink SerialTarget or OctoPrintTarget); False
+        (reported) when the target or profile cannot work."""
+        if self.result is None or self.job is not None:
+            return False
+        job_path = None
+        if self.job_gcode_path is not None:
+            job_path = str(Path(self.job_gcode_path).with_suffix(".printjob.json"))
+        try:
+            profile = load_profile(profile_name)
+            self.job = start_job(target, self.result.gcode, profile,
+                                 lambda ev: self.run.post(self.handle_event, ev), job_path=job_path,
+                                 gcode_path=self.job_gcode_path or "")
+        except (ValueError, OSError, RuntimeError) as exc:
+            self.fail("Printer error", exc)
+            return False
+        self.current_layer = -1
+        self.last_progress = None
+        return True
+
+    def handle_event(self, ev: PrintEvent) -> None:
+        """A report of the job (on the runner's thread): progress, the printed layer, errors, the end."""
+        pr = ev.progress
+        layer_changed = False
+        if pr is not None:
+            self.last_progress = pr
+            layer_changed = pr.layer != self.current_layer
+            self.current_layer = pr.layer
+        if ev.error:
+            message = ev.error
+            if ev.job_path and str(ev.job_path) not in message:
+                message += (f"\n\nThe job state is saved in {ev.job_path}; resume with: "
+                            f"arapp print --resume {ev.job_path}")
+            self.events.error.emit(ev.error_title or "Printer error", message)
+        if ev.finished:
+            self.job = None
+        self.events.print_event.emit(ev)
+        # the preview's highlight follows the printer's acknowledged lines, as the link reports them
+        if self.preview_on and ((layer_changed and pr.layer >= 0 and self.job is not None) or ev.finished):
+            self.emit_preview()
+
+    def toggle_pause(self) -> str:
+        """Pause or resume the running print; returns what it did ("paused", "resumed" or "")."""
+        job = self.job
+        if job is None:
+            return ""
+        if job.paused:
+            job.resume()
+            return "resumed"
+        job.pause()
+        return "paused"
+
+    def cancel_print(self) -> None:
+        if self.job is not None:
+            self.job.cancel()
