@@ -37,7 +37,7 @@ demo: $(STAMP)
 	$(ARAPP) demo --out out/demo
 
 test: $(STAMP) $(OCTO_STAMP)
-	$(PY) -m pytest -q -p no:cacheprovider tests
+	$(VENV)/bin/lint-imports --no-cache && $(PY) -m pytest -q -p no:cacheprovider tests
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py --out BENCHMARKS.md
