@@ -200,15 +200,15 @@ def test_cancelled_job_cannot_be_resumed(tmp_path, capsys):
     cut = len(done) - 7
     assert done[:cut] == expected[:cut] and done[cut:] == ["M104 S0", "M140 S0", "M107", "G91", "G1 Z10 F600",
                                                             "G90", "M84"]
-    from arapp.printing.link.job import check_resumable
-
-    with pytest.raises(JobFileError, match="cancelled"):
-        check_resumable(JobState.load(job), job)
     with MarlinPty() as emu:
         rc = main(["print", "--resume", str(job), "--port", emu.port, "--timeout", "1"])
         assert ran(emu) == []
     err = capsys.readouterr().err
     assert rc == 2 and "cannot be resumed" in err and len(err.strip().splitlines()) == 1
+    from arapp.printing.link.job import check_resumable
+
+    with pytest.raises(JobFileError, match="cancelled"):
+        check_resumable(JobState.load(job), job)
     # The link refuses it too (the GUI resumes through it).
     with MarlinPty() as emu:
         p = connect(emu)
@@ -310,14 +310,14 @@ def test_disk_full_mid_print_finishes_and_says_so(tmp_path, monkeypatch):
             raise OSError(errno.ENOSPC, "No space left on device")
         real_save(self, path)
 
-    original = SerialPrinter._save_now_and_then
+    original = getattr(SerialPrinter, "_save_now_and_then", None)
 
     def save_at_every_reply(link, state):
         link._last_save = 0.0  # without the 5 s spacing: the test sees saves mid-print
         original(link, state)
 
     monkeypatch.setattr(JobState, "save", save)
-    monkeypatch.setattr(SerialPrinter, "_save_now_and_then", save_at_every_reply)
+    monkeypatch.setattr(SerialPrinter, "_save_now_and_then", save_at_every_reply, raising=False)
     with MarlinPty(move_s=0.002) as emu:
         p = connect(emu, job_path=job)
         state = bounded(p.print_gcode, lines)
