@@ -8,7 +8,7 @@ Frames:
   anchor frame itself; for an `aruco_board` or `charuco` board (OpenCV's
   frame: origin at the first marker's outer corner, y down, z into the paper)
   it is the board centre with y and z flipped.
-- *world frame*: the first anchor's frame (RECORDING_FORMAT.md), metres.
+- *world frame*: the first anchor's frame (docs/recording-format.md), metres.
 
 The placement itself (size of the model's largest extent in millimetres,
 offset, rotation) is `arapp.geometry.Placement`, stored with the model and

@@ -1,4 +1,4 @@
-"""Headless replay of a recording through the pipeline, writing what RECORDING_FORMAT.md lists.
+"""Headless replay of a recording through the pipeline, writing what docs/recording-format.md lists.
 
 Outputs in `out_dir`: poses.tum, tracking.csv, overlay.mp4 (unless no_video),
 report.json and trajectory.png. Every per-frame line is flushed as it is

@@ -1,7 +1,7 @@
 """Sliced toolpaths drawn in AR on the real printer bed (the print preview).
 
 The recording's (or live session's) first anchor is the printer's bed anchor;
-the printer profile's `bed_from_anchor` (PRINTER_PROFILE.md) places it on the
+the printer profile's `bed_from_anchor` (docs/printer-profile.md) places it on the
 bed. Toolpaths are G-code coordinates in the bed frame (millimetres); this
 module turns them into coloured line sets for `arapp.render.OverlayRenderer`
 and gives the transform from the bed frame to the world (metres).
@@ -118,7 +118,7 @@ def toolpath_overlay(gcode_path: str | Path, printer_path: str | Path | None, an
     profile = load_profile(printer_path)
     if profile.bed_from_anchor is None:
         raise ValueError(f"printer profile {profile.source} has no bed_anchor; add one with its bed_from_anchor "
-                         f"(see PRINTER_PROFILE.md) so the toolpaths can be placed on the bed")
+                         f"(see docs/printer-profile.md) so the toolpaths can be placed on the bed")
     bed = (profile.bed.width, profile.bed.depth, profile.bed.height)
     sets = toolpath_line_sets(layers, bed, layer, current)
     return sets, world_from_bed(anchors[0].world_from_anchor, profile.bed_from_anchor)

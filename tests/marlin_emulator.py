@@ -1,6 +1,6 @@
 """A small Marlin emulator on a pseudo-terminal, with the faults printer-host users report.
 
-`MarlinPty` answers like Marlin 2.x (DOMAIN.md §4): numbered, checksummed
+`MarlinPty` answers like Marlin 2.x (docs/domain.md §4): numbered, checksummed
 lines; `Resend: <last + 1>` + `ok` for a bad or out-of-sequence line; one `ok`
 per line; M115 capabilities; M105 temperatures; optional auto-report
 (`M155`), host keep-alive (`busy:` while a blocking command runs), heat waits

@@ -1,4 +1,4 @@
-"""NURBS evaluation against geomdl and against the defining formulas (DOMAIN.md §1)."""
+"""NURBS evaluation against geomdl and against the defining formulas (docs/domain.md §1)."""
 
 from math import comb
 

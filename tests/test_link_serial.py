@@ -21,7 +21,7 @@ from arapp.printing.link.serial_link import SerialPrinter
 from virtual_printer import VirtualPrinterPty
 
 # The plugin's defaults without 105:resend_with_timeout, which makes line 105
-# unrunnable by any host (DOMAIN.md §4); test_survives_resend_with_timeout has it.
+# unrunnable by any host (docs/domain.md §4); test_survives_resend_with_timeout has it.
 FAULTS = ["100:resend", "110:missing_lineno", "115:checksum_mismatch"]
 # Host lines before the program: N0 M110, N1 M115, N2 M155 (auto-report).
 FIRST_PROGRAM_LINE = 3

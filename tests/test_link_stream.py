@@ -1,6 +1,6 @@
 """The serial protocol's state object (arapp.printing.link.stream.LineStream), one rule at a time, no I/O.
 
-Expected values are written here from Marlin's protocol (DOMAIN.md §4): frames
+Expected values are written here from Marlin's protocol (docs/domain.md §4): frames
 are built by hand (`N<n> <cmd>*<xor>`), times are given explicitly.
 """
 

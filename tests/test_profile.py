@@ -1,4 +1,4 @@
-"""Printer profiles (shared/PRINTER_PROFILE.md): the generic printer, defaults, and errors that name the key."""
+"""Printer profiles (docs/printer-profile.md): the generic printer, defaults, and errors that name the key."""
 
 import json
 

@@ -1,4 +1,4 @@
-"""`arapp replay` writes exactly what RECORDING_FORMAT.md lists, and the overlay sits where the model projects."""
+"""`arapp replay` writes exactly what docs/recording-format.md lists, and the overlay sits where the model projects."""
 
 import csv
 import json

@@ -30,7 +30,7 @@ VirtualPrinter's parser would crash on the minus sign).
 every n-th numbered host line, which the printer finds by its checksum.
 
 `marlin_resend=True` makes the printer's checksum-error resend request ask
-for the last accepted line + 1 as Marlin does (DOMAIN.md §4: the
+for the last accepted line + 1 as Marlin does (docs/domain.md §4: the
 VirtualPrinter asks for `current_line + 1`, a counter that drifts once other
 faults have happened). It changes nothing else.
 """

@@ -2,7 +2,7 @@
 
 All poses are `world_from_camera` 4x4 arrays, positions in metres, times in
 seconds. No alignment is applied: with markers the world frame is the marker's,
-so an estimate must match the ground truth as it stands (DOMAIN.md §3).
+so an estimate must match the ground truth as it stands (docs/domain.md §3).
 """
 
 from __future__ import annotations

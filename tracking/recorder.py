@@ -1,4 +1,4 @@
-"""Writing recordings (`arapp-recording/1`, shared RECORDING_FORMAT.md) and recording from a source.
+"""Writing recordings (`arapp-recording/1`, docs/recording-format.md) and recording from a source.
 
 `RecordingWriter` writes the video (intra-frame MJPG in an .avi by default,
 or lossless FFV1 in .mkv), `frames.csv` with the real timestamps, and

@@ -1,6 +1,6 @@
 """session.json of a recording (`arapp-recording/1`) and the anchors it declares.
 
-See shared RECORDING_FORMAT.md: lengths in metres; the world is the frame of
+See docs/recording-format.md: lengths in metres; the world is the frame of
 the first anchor; every other anchor carries `world_from_anchor`.
 """
 

@@ -1,6 +1,6 @@
 """B-spline basis functions (Cox-de Boor), vectorised over parameter arrays.
 
-Conventions (DOMAIN.md §1): with n+1 control points and degree p there are
+Conventions (docs/domain.md §1): with n+1 control points and degree p there are
 n+p+2 non-decreasing knots t_0..t_(n+p+1); the valid domain is
 [t_p, t_(n+1)]. Only the p+1 functions N_(s-p..s),p are non-zero on the span
 [t_s, t_(s+1)); at the right end of the domain the last non-empty span is

@@ -1,4 +1,4 @@
-"""Constructions that give exact NURBS nets (DOMAIN.md §1).
+"""Constructions that give exact NURBS nets (docs/domain.md §1).
 
 Curves passed in may be 2-D or 3-D. For `revolve` a 2-D profile point is
 (radius, height) and a 3-D one (x, 0, z) in the xz half-plane x >= 0; for all
@@ -15,7 +15,7 @@ from .curve import NurbsCurve
 from .errors import GeometryError, fmt
 from .surface import NurbsSurface
 
-# The exact 7-point circle on a square (DOMAIN.md §1): unit radius, xy plane.
+# The exact 7-point circle on a square (docs/domain.md §1): unit radius, xy plane.
 CIRCLE_POINTS = np.array([[1, 0], [1, 1], [-1, 1], [-1, 0], [-1, -1], [1, -1], [1, 0]], dtype=float)
 CIRCLE_WEIGHTS = np.array([1, 0.5, 0.5, 1, 0.5, 0.5, 1])
 CIRCLE_KNOTS = np.array([0, 0, 0, 0.25, 0.5, 0.5, 0.75, 1, 1, 1])

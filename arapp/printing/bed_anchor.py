@@ -1,4 +1,4 @@
-"""Entering the bed anchor once: where the marker lies on the printer's bed (PRINTER_PROFILE.md).
+"""Entering the bed anchor once: where the marker lies on the printer's bed (docs/printer-profile.md).
 
 Two ways, both giving `bed_from_anchor` (anchor frame taken in millimetres ->
 bed frame, millimetres):

@@ -1,6 +1,6 @@
-"""Filament materials: temperatures (DOMAIN.md §4), fan, density and speed factor.
+"""Filament materials: temperatures (docs/domain.md §4), fan, density and speed factor.
 
-Hotend ranges and bed needs are DOMAIN.md's table; the default hotend and bed
+Hotend ranges and bed needs are docs/domain.md's table; the default hotend and bed
 temperatures are points inside those ranges. Densities (g/cm³) are the usual
 datasheet values, used for the filament mass in the G-code header.
 """

@@ -1,7 +1,7 @@
-"""Printer profiles (`arapp-printer/1`, shared/PRINTER_PROFILE.md): bed size, nozzle, filament, G-code, link, bed anchor.
+"""Printer profiles (`arapp-printer/1`, docs/printer-profile.md): bed size, nozzle, filament, G-code, link, bed anchor.
 
 Lengths are millimetres except the bed anchor's own marker sizes (metres, as in
-RECORDING_FORMAT.md). `bed_from_anchor` maps the anchor frame, taken in
+docs/recording-format.md). `bed_from_anchor` maps the anchor frame, taken in
 millimetres, to the bed frame (the printer's G-code coordinates).
 """
 

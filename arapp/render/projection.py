@@ -1,6 +1,6 @@
 """Camera maths for the overlay: OpenCV intrinsics -> OpenGL matrices, depth range, pixel regions.
 
-Conventions (DOMAIN.md §2): OpenCV camera frame x right, y down, z forward; OpenGL
+Conventions (docs/domain.md §2): OpenCV camera frame x right, y down, z forward; OpenGL
 (pyrender) camera frame x right, y up, z backward; the two differ by diag(1, -1, -1).
 Pixel centres are at integer coordinates (OpenCV), so pixel column i covers
 [i - 0.5, i + 0.5). The projection matrix maps the undistorted pinhole pixel

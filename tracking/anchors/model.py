@@ -1,7 +1,7 @@
 """Geometry of the anchors of a session: where every detectable corner lies.
 
 Each anchor has its own plane frame (z = 0 on the paper, see
-RECORDING_FORMAT.md) and a `world_from_anchor` transform. Lengths in metres.
+docs/recording-format.md) and a `world_from_anchor` transform. Lengths in metres.
 """
 
 from __future__ import annotations

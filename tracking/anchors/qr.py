@@ -12,7 +12,7 @@ when it fails the code is decoded again.
 
 Module coordinates: u right, v down, (0,0) the symbol's top-left corner and
 (N,N) its bottom-right (N modules, quiet zone excluded). The anchor frame is
-RECORDING_FORMAT.md's: x = -L/2 + u L/N, y = L/2 - v L/N.
+docs/recording-format.md's: x = -L/2 + u L/N, y = L/2 - v L/N.
 """
 
 from __future__ import annotations

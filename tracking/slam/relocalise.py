@@ -1,7 +1,7 @@
 """Relocalisation by keyframes: when tracking is lost and no anchor is in view, match the frame's
 ORB descriptors against the map points seen by keyframes and solve PnP RANSAC.
 
-Fewer than `min_inliers` (default 20) RANSAC inliers is not trusted (DOMAIN.md §3).
+Fewer than `min_inliers` (default 20) RANSAC inliers is not trusted (docs/domain.md §3).
 """
 
 from __future__ import annotations

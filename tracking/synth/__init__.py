@@ -1,7 +1,7 @@
 """Synthetic recordings with exact ground truth: a textured desk, printed anchors, camera effects.
 
 `synthesize(scene, out)` renders a `Scene` (tracking.synth.scene) into a
-recording folder (shared RECORDING_FORMAT.md) with `groundtruth.tum`.
+recording folder (docs/recording-format.md) with `groundtruth.tum`.
 Presets: tracking.synth.presets; CLI: `arapp synth`.
 """
 

@@ -5,7 +5,7 @@ Each anchor becomes a `PrintedPattern`: a rectangular array of square tiles
 cells, laid out in "print coordinates" (p, q): p to the right and q down the
 sheet as printed, metres, origin at the first tile's top-left outer corner.
 `anchor_xy = origin + (p * sx, q * sy)` maps them into the anchor frame
-(see shared RECORDING_FORMAT.md for the anchor conventions).
+(see docs/recording-format.md for the anchor conventions).
 """
 
 from __future__ import annotations

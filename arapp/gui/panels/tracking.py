@@ -117,7 +117,7 @@ class AnchorsDialog(QDialog):
         self.setWindowTitle("Anchors")
         self.resize(520, 420)
         lay = QVBoxLayout(self)
-        lay.addWidget(QLabel("Anchors as in session.json (metres; see RECORDING_FORMAT.md). "
+        lay.addWidget(QLabel("Anchors as in session.json (metres; see docs/recording-format.md). "
                              "Used for live cameras and videos without a session."))
         self.text = QPlainTextEdit(json.dumps(anchors_json, indent=2))
         lay.addWidget(self.text, 1)

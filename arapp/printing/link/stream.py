@@ -7,7 +7,7 @@ the printer's replies (`on_ok`, `on_resend`, `on_timeout`, `on_action`, ...)
 and writes what `frames_to_send` returns; every method takes the time `now`
 (seconds, monotonic clock) so each rule is testable alone.
 
-The rules (DOMAIN.md §4, issue #14):
+The rules (docs/domain.md §4, issue #14):
 
 - Progress is what the firmware acknowledges: a program line counts once, when
   its `ok` (or a resend request for a later line) arrives. Lines the host adds
@@ -40,7 +40,7 @@ from dataclasses import dataclass, field
 from . import protocol as P
 from .job import Command, JobState, cancel_commands
 
-# Commands that may run for minutes without an answer (DOMAIN.md §4).
+# Commands that may run for minutes without an answer (docs/domain.md §4).
 BLOCKING = frozenset({"M109", "M190", "G28", "G29", "G4", "M0", "M1", "M600", "M400"})
 HEAT_WAITS = {"M109": ("T", "T0"), "M190": ("B",)}
 # A heater reading this close to the wait's target (degrees C) no longer shows
