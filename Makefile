@@ -20,7 +20,7 @@ $(STAMP): pyproject.toml constraints.txt requirements-peers.txt scripts/system-d
 	./scripts/system-deps.sh prusa-slicer
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -c constraints.txt -e '.[test]'
+	$(PY) -m pip install -q -c constraints.txt -e '.[test,scan]'
 	$(PY) -m pip install -q -c constraints.txt -r requirements-peers.txt
 	$(PY) -m pip install -q --no-deps OctoPrint==1.11.8 Printrun==2.2.0
 	# pyrender pins PyOpenGL 3.1.0, which cannot use EGL on current Mesa.

@@ -28,6 +28,7 @@ COMMANDS = [
     ("slice", "slice"),
     ("print", "print_"),
     ("printer", "printer"),
+    ("scan", "scan"),
 ]
 
 

@@ -1,0 +1,173 @@
+"""The scan pipeline: frames -> tracked views -> chosen views -> refined poses -> depth maps -> solid.
+
+    result = scan(source, camera, anchors, ScanOptions(), progress=print_progress)
+    result.mesh          # trimesh.Trimesh, watertight, world frame (the anchors' frame), metres
+    write_mesh(result.mesh, "vase.stl", print_mm=True)   # temp file + rename: never half-written
+
+Steps (each reports to `progress(stage, done, total)`): the tracker places
+every frame from the markers (metres); views are chosen by sharpness and
+baseline; SIFT + bundle adjustment refine their poses with the markers'
+corners as fixed points; SGBM gives depth per rectified pair, filtered for
+multi-view consistency; the object's region is what stands on the board; a
+TSDF over it, closed by the silhouette hull and cut at the paper, gives a
+watertight solid by marching cubes.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import trimesh
+
+from arapp.scan.views import ScanCancelled, View, look_at_point, select_views, track_views
+
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass
+class ScanOptions:
+    """max_views: views used for depth; min_angle_deg: least angle between chosen views (seen from the
+    object); refine: run the SIFT bundle adjustment; voxel: TSDF voxel (m; None = object extent / 110);
+    z_range: depths SGBM searches (m); min_agree: depth maps that must confirm a depth."""
+
+    max_views: int = 20
+    min_angle_deg: float = 7.0
+    refine: bool = True
+    voxel: float | None = None
+    z_range: tuple[float, float] = (0.08, 1.5)
+    min_agree: int = 2
+    max_frames: int | None = None
+
+
+@dataclass
+class ScanResult:
+    mesh: trimesh.Trimesh
+    views: list[View]
+    poses: list[np.ndarray]
+    frames_tracked: int
+    timings: dict = field(default_factory=dict)
+    stats: dict = field(default_factory=dict)
+
+
+def _check(cancel):
+    if cancel is not None and cancel.is_set():
+        raise ScanCancelled()
+
+
+def scan(source, camera, anchors, options: ScanOptions | None = None, progress: Progress | None = None,
+         cancel=None) -> ScanResult:
+    """Reconstruct the object standing on the first anchor from the frames of `source`."""
+    from arapp.scan import depth as dpt
+    from arapp.scan import fusion as fu
+
+    opt = options or ScanOptions()
+    timings, stats = {}, {}
+    t = time.perf_counter()
+    views = track_views(source, camera, anchors, progress, cancel, opt.max_frames)
+    timings["track_s"] = time.perf_counter() - t
+    if len(views) < 3:
+        raise RuntimeError(f"only {len(views)} frames were placed from the markers; keep the board in view "
+                           "while circling the object")
+    chosen = select_views(views, opt.max_views, opt.min_angle_deg)
+    if len(chosen) < 3:
+        raise RuntimeError("fewer than 3 sharp views from different directions; circle the object more slowly")
+    stats["views"] = len(chosen)
+    K = camera.K.copy()
+    poses = [v.pose for v in chosen]
+    t = time.perf_counter()
+    if opt.refine:
+        _check(cancel)
+        if progress:
+            progress("refining poses", 0, 1)
+        from arapp.scan.refine import refine_poses
+
+        ref = refine_poses(chosen, K, anchors)
+        poses = ref.poses
+        stats.update(ba_rms_before_px=ref.rms_before, ba_rms_after_px=ref.rms_after, ba_tracks=ref.tracks,
+                     ba_moved_mm=ref.moved_m * 1000, ba_turned_deg=ref.turned_deg)
+        if progress:
+            progress("refining poses", 1, 1)
+    timings["refine_s"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    target = look_at_point(chosen)
+    pairs = dpt.choose_pairs(poses, target)
+    maps = []
+    for k, (i, j) in enumerate(pairs):
+        _check(cancel)
+        dm = dpt.stereo_depth(chosen[i].image, chosen[j].image, K, poses[i], poses[j], opt.z_range, i)
+        if dm is not None:
+            maps.append(dm)
+        if progress:
+            progress("dense matching", k + 1, len(pairs))
+    if len(maps) < 2:
+        raise RuntimeError("no pair of views could be matched densely; circle the object at one height too")
+    frame = fu.board_frame(anchors)
+    # only what stands on the board matters: the rest is not checked (saves time) and not kept
+    def on_board(X):
+        L = frame.to_local(X)
+        return frame.on_board(L, 0.01) & (L[:, 2] > -0.01)
+
+    _check(cancel)
+    dpt.filter_consistent(maps, min_agree=opt.min_agree, keep=on_board)
+    maps = [m for m in maps if np.count_nonzero(m.depth) > 500]
+    stats["depth_maps"] = len(maps)
+    timings["depth_s"] = time.perf_counter() - t
+    if len(maps) < 2:
+        raise RuntimeError("the depth maps do not agree; is the object textured, and the board flat?")
+
+    t = time.perf_counter()
+    points = np.concatenate([m.points()[0] for m in maps])
+    region = fu.object_region(points, frame)
+    if region is None:
+        raise RuntimeError("nothing stands on the board; put the object on the printed board and scan again")
+    lo, hi = region
+    extent = float(np.max(hi - lo))
+    voxel = opt.voxel or float(np.clip(extent / 110.0, 0.0003, 0.005))
+    trunc = max(3.0 * voxel, 0.002)
+    masks = fu.object_masks(maps, frame, lo, hi)
+    _check(cancel)
+    field_, lo2, voxel = fu.fuse(maps, frame, lo, hi, voxel, trunc, masks,
+                                 hull_slack=max(1, len(maps) // 10), progress=progress)
+    _check(cancel)
+    mesh = fu.surface_from_field(field_, lo2, voxel, frame)
+    timings["fuse_s"] = time.perf_counter() - t
+    stats.update(voxel_mm=voxel * 1000, faces=len(mesh.faces), watertight=bool(mesh.is_watertight))
+    return ScanResult(mesh, chosen, poses, len(views), timings, stats)
+
+
+def print_frame(anchors) -> np.ndarray:
+    """4x4 from the world frame (m) to the print frame (mm): up along +z, the paper at z = 0."""
+    from arapp.scan.fusion import board_frame
+
+    fr = board_frame(anchors)
+    T = np.eye(4)
+    T[:3, :3] = fr.R.T * 1000.0
+    T[:3, 3] = -fr.R.T @ fr.origin * 1000.0
+    return T
+
+
+def write_mesh(mesh: trimesh.Trimesh, path: str | Path, transform: np.ndarray | None = None) -> Path:
+    """Write `mesh` (optionally transformed) to path (.ply, .stl, .obj) through a temporary file in the same
+    folder renamed into place, so an interrupted write never leaves a partial file."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".ply", ".stl", ".obj"):
+        raise ValueError(f"{path}: unsupported mesh type {suffix or '(none)'}; use .ply, .stl or .obj")
+    if not path.parent.is_dir():
+        raise FileNotFoundError(f"{path.parent}: folder does not exist; create it or choose another -o")
+    m = mesh.copy()
+    if transform is not None:
+        m.apply_transform(transform)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp{suffix}")
+    try:
+        m.export(tmp, file_type=suffix[1:])
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return path
