@@ -78,7 +78,7 @@ def lost_hint(anchors, camera=None, estimated: bool = False) -> str:
             how += f", {_cm(near)} to {_cm(far)} from the camera"
         else:
             how += ", closer to the camera: its markers are too small for this picture"
-    how += ". No sheet? Print one (Tracking > Marker sheets)."
+    how += ". No sheet? Print one: Marker sheets... in the Tracking panel."
     if estimated:
         how += " The camera is uncalibrated: sizes are approximate."
     return f"{first}.\n{how}"

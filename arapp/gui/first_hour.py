@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QMenu
 
 from tracking.default_intrinsics import is_estimated
@@ -22,6 +23,31 @@ from arapp.gui.printer_setup import PrinterSetupDialog
 from arapp.gui.welcome import CalibrationBanner, LostHint, WelcomeView
 
 DEMO_MODEL = Path(__file__).resolve().parents[2] / "models" / "vase.json"
+
+
+def fit_to_screen(window) -> None:
+    """Side panels scroll instead of setting the window's minimum height, and the window is no larger than
+    the screen's available area (a 1366x768 laptop screen showed neither the replay bar nor the status bar)."""
+    from PySide6.QtWidgets import QDockWidget, QScrollArea
+
+    for dock in window.findChildren(QDockWidget):
+        inner = dock.widget()
+        if inner is None or isinstance(inner, QScrollArea):
+            continue
+        area = QScrollArea()
+        area.setWidgetResizable(True)
+        area.setFrameShape(QScrollArea.Shape.NoFrame)
+        area.setWidget(inner)
+        area.setMinimumWidth(inner.minimumSizeHint().width() + area.verticalScrollBar().sizeHint().width())
+        dock.setWidget(area)
+    screen = window.screen()
+    if screen is not None:
+        avail = screen.availableGeometry()
+        w, h = min(window.width(), avail.width()), min(window.height(), avail.height() - 40)  # 40: title bar
+        window.resize(w, h)
+    docks = [d for d in window.findChildren(QDockWidget) if d.isVisible() or not d.isHidden()]
+    if len(docks) == 2:  # the Model panel has more to show than the Tracking panel
+        window.resizeDocks(docks, [2 * window.height() // 3, window.height() // 3], Qt.Orientation.Vertical)
 
 
 def calibratable(spec: str | None, info) -> bool:
@@ -51,6 +77,7 @@ class FirstHour:
         window.view.resized.connect(lambda *_: self._place_hint())
         self._place_hint()
         self.show_welcome(True)
+        fit_to_screen(window)
 
         ev = window.session.events
         ev.source_opening.connect(lambda _name: self.show_welcome(False))

@@ -115,7 +115,11 @@ class WelcomeView(QWidget):
             self.recordings.addItem(item)
         self.recordings.itemActivated.connect(self._activated)
         self.recordings.itemDoubleClicked.connect(self._activated)
-        lay.addWidget(self.recordings, 1)
+        rows = max(3, min(self.recordings.count(), 10))
+        self.recordings.setMaximumHeight(rows * self.recordings.sizeHintForRow(0) + 2 * self.recordings.frameWidth()
+                                         if self.recordings.count() else 120)
+        lay.addWidget(self.recordings)
+        lay.addStretch(1)
 
     def _activated(self, item: QListWidgetItem) -> None:
         self.recording_chosen.emit(item.data(Qt.ItemDataRole.UserRole))
