@@ -1,5 +1,7 @@
 """`arapp replay`: run the tracking pipeline headless on a recording and write its outputs."""
 
+import sys
+
 HELP = "replay a recording through tracking and rendering; write poses, CSV, overlay video, report"
 
 
@@ -48,7 +50,7 @@ def run(args):
                          tracker_params={"marker_every": args.marker_every} if not args.no_slam else {})
     # Written to a temporary folder moved into place at the end: a failure leaves no (empty) --out behind.
     with staged_folder(args.out) as tmp:
-        report = replay(args.recording, tmp, opts, progress=terminal_progress())
+        report = replay(args.recording, tmp, opts, progress=terminal_progress(sys.stderr))  # stderr as now
     keys = ["frames", "tracked_fraction", "fps", "ate_rmse_m", "ate_max_m", "rpe_trans_m_per_s", "rpe_rot_deg_per_s"]
     summary = ", ".join(f"{k} {report[k]:.4g}" for k in keys if isinstance(report.get(k), (int, float)))
     print(f"replay: {summary}")

@@ -49,6 +49,7 @@ FLAGS = {"layer_height": "--layer-height", "first_layer_height": "--first-layer-
 LAYER_FACTORS = (0.1, 0.8)        # layer height as a fraction of the nozzle diameter (PrusaSlicer stops at 0.75-0.8)
 LINE_WIDTH_FACTORS = (0.5, 2.5)   # line width as a multiple of the nozzle diameter
 MAX_Z_HOP_MM = 10.0
+EPS_MM = 1e-9                     # 0.8 x 0.4 is 0.32000000000000006 in floating point: still 0.32
 NOZZLE_RULES = {name: f" ({LAYER_FACTORS[0]:g} to {LAYER_FACTORS[1]:g} x the nozzle diameter on a given printer)"
                 for name in ("layer_height", "first_layer_height")}
 MIN_HOTEND = 150.0                # °C; below it no filament melts (and Marlin refuses to extrude below 170)
@@ -157,11 +158,11 @@ class SliceSettings:
         lo, hi = layer_range(nozzle)
         for name in ("layer_height", "first_layer_height"):
             value = getattr(self, name)
-            if not _within(value, lo, hi):
+            if not _within(value, lo - EPS_MM, hi + EPS_MM):
                 raise SettingsError(f"{_label(name)} is {_num(value)} mm, but {where} prints layers from "
                                     f"{_num(lo)} to {_num(hi)} mm; choose one in that range")
         w_lo, w_hi = LINE_WIDTH_FACTORS[0] * nozzle, LINE_WIDTH_FACTORS[1] * nozzle
-        if self.line_width is not None and not _within(self.line_width, w_lo, w_hi):
+        if self.line_width is not None and not _within(self.line_width, w_lo - EPS_MM, w_hi + EPS_MM):
             raise SettingsError(f"{_label('line_width')} is {_num(self.line_width)} mm, but {where} lays lines "
                                 f"from {_num(w_lo)} to {_num(w_hi)} mm wide; choose one in that range")
         hop_max = min(MAX_Z_HOP_MM, float(profile.bed.height))
