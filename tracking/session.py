@@ -204,7 +204,9 @@ class Session:
 
     def save(self) -> Path:
         path = self.folder / "session.json"
-        path.write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        tmp = path.with_name(".session.json.tmp")
+        tmp.write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        tmp.replace(path)  # a crash never leaves half a session.json
         return path
 
 
@@ -243,7 +245,11 @@ def load_session(folder: str | Path) -> Session:
     if not path.is_file():
         raise SessionError(f"{folder}: no session.json; a recording folder needs session.json and its video")
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
         raise SessionError(f"{path}: invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}") from None
+    except UnicodeDecodeError as e:
+        raise SessionError(f"{path}: not a text file ({e.reason}); session.json is JSON") from None
+    except OSError as e:
+        raise SessionError(f"{path}: cannot be read ({e.strerror or e})") from None
     return parse_session(data, folder, str(path))

@@ -96,14 +96,14 @@ def settings_from_args(args, profile=None):
 
 
 def run(args) -> int:
-    from arapp.exchange import write_atomic, write_mesh
+    from arapp.exchange import is_mesh_path, write_atomic, write_mesh
     from arapp.printing import load_profile
     from arapp.printing.gcode import format_duration
 
     profile = load_profile(args.printer)
     settings = settings_from_args(args, profile)
     out = Path(args.output)
-    if out.suffix.lower() in (".stl", ".3mf", ".obj", ".json") or out.is_dir():
+    if is_mesh_path(out) or out.suffix.lower() == ".json" or out.is_dir():
         raise ValueError(f"-o {out}: give a G-code file name (.gcode), not a model or folder")
     mesh = load_for_printing(args.model, args.size, args.thickness, profile)
     if args.slicer == "prusa":

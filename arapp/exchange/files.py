@@ -1,0 +1,60 @@
+"""The table of arapp's document formats: for each, the one reader, the error it raises (naming the
+file and the field), the suffixes and where the format is described.
+
+    read_document("printer", "my_printer.json")  ->  PrinterProfile
+
+Readers live beside the types they build (a reader must know the type; tracking never imports arapp,
+so the session and camera readers stay in tracking); this table is where they are all found. The
+print job file (arapp.printing.link.job) is the link's own format and has its own reader there.
+Mesh files are arapp.exchange.meshes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from arapp.geometry.errors import ModelError
+from arapp.geometry.model import load_model
+from arapp.printing.profile import ProfileError, load_profile
+from tracking.camera import Camera
+from tracking.errors import CalibrationError, SessionError
+from tracking.session import load_session
+from tracking.sources.recording import read_frames_csv
+
+
+def _session(path: Path):
+    """session.json, or the recording folder that holds it."""
+    return load_session(path.parent if path.name == "session.json" else path)
+
+
+@dataclass(frozen=True)
+class DocumentFormat:
+    """One document format: `what` it is, its `suffixes` (or file name), `read(path)`, the `error` that
+    read raises (a ValueError naming file and field) and `described` (where the format is written down)."""
+
+    what: str
+    suffixes: tuple[str, ...]
+    read: Callable[[Path], object]
+    error: type[Exception]
+    described: str
+
+
+DOCUMENTS: dict[str, DocumentFormat] = {
+    "model": DocumentFormat("arapp NURBS model", (".json",), load_model, ModelError, "models/README.md"),
+    "session": DocumentFormat("recording session", ("session.json",), _session, SessionError,
+                              "docs/recording-format.md"),
+    "frames": DocumentFormat("recording frame times", ("frames.csv",), read_frames_csv, SessionError,
+                             "docs/recording-format.md"),
+    "printer": DocumentFormat("printer profile", (".json",), load_profile, ProfileError, "docs/printer-profile.md"),
+    "camera": DocumentFormat("camera calibration (OpenCV FileStorage)", (".yaml", ".yml", ".xml", ".json"),
+                             Camera.load_yaml, CalibrationError, "docs/recording-format.md"),
+}
+
+
+def read_document(kind: str, path):
+    """Read `path` as a document of `kind` (a key of DOCUMENTS) with its one reader."""
+    if kind not in DOCUMENTS:
+        raise ValueError(f"unknown document kind {kind!r}; known: {', '.join(DOCUMENTS)}")
+    return DOCUMENTS[kind].read(Path(path))
