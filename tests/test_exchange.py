@@ -17,6 +17,8 @@ import numpy as np
 import pytest
 import trimesh
 
+import arapp.geometry  # noqa: F401 - registers the "model" document format
+import arapp.printing.profile  # noqa: F401 - registers "printer"
 from arapp.exchange import EXPORT_SUFFIXES, FORMATS, MESH_SUFFIXES, MeshFileError, load_mesh, write_mesh
 from arapp.exchange.files import DOCUMENTS, read_document
 from arapp.exchange.staging import staged_folder

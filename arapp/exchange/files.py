@@ -3,9 +3,10 @@ file and the field), the suffixes and where the format is described.
 
     read_document("printer", "my_printer.json")  ->  PrinterProfile
 
-Readers live beside the types they build (a reader must know the type; tracking never imports arapp,
-so the session and camera readers stay in tracking); this table is where they are all found. The
-print job file (arapp.printing.link.job) is the link's own format and has its own reader there.
+Readers live beside the types they build, and the layers above this one register theirs with one
+`register_document(...)` line next to the reader (arapp.geometry.model: "model";
+arapp.printing.profile: "printer"); the tracking formats (session, frames, camera) are registered
+here. The print job file (arapp.printing.link.job) is the link's own format with its reader there.
 Mesh files are arapp.exchange.meshes.
 """
 
@@ -15,9 +16,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from arapp.geometry.errors import ModelError
-from arapp.geometry.model import load_model
-from arapp.printing.profile import ProfileError, load_profile
 from tracking.camera import Camera
 from tracking.errors import CalibrationError, SessionError
 from tracking.session import load_session
@@ -42,15 +40,19 @@ class DocumentFormat:
 
 
 DOCUMENTS: dict[str, DocumentFormat] = {
-    "model": DocumentFormat("arapp NURBS model", (".json",), load_model, ModelError, "models/README.md"),
     "session": DocumentFormat("recording session", ("session.json",), _session, SessionError,
                               "docs/recording-format.md"),
     "frames": DocumentFormat("recording frame times", ("frames.csv",), read_frames_csv, SessionError,
                              "docs/recording-format.md"),
-    "printer": DocumentFormat("printer profile", (".json",), load_profile, ProfileError, "docs/printer-profile.md"),
     "camera": DocumentFormat("camera calibration (OpenCV FileStorage)", (".yaml", ".yml", ".xml", ".json"),
                              Camera.load_yaml, CalibrationError, "docs/recording-format.md"),
 }
+
+
+def register_document(kind: str, fmt: DocumentFormat) -> DocumentFormat:
+    """Add a document format under `kind` (one line beside its reader); returns it."""
+    DOCUMENTS[kind] = fmt
+    return fmt
 
 
 def read_document(kind: str, path):

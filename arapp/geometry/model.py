@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from arapp.exchange.files import DocumentFormat, register_document
 from arapp.exchange.jsonfile import read_json
 from arapp.exchange.meshes import EXPORT_SUFFIXES, MESH_SUFFIXES, MeshFileError, load_mesh, write_mesh
 
@@ -262,6 +263,9 @@ def _load_mesh(path: Path) -> Model:
     size = float(np.max(mesh.extents)) if np.max(mesh.extents) > 0 else 50.0
     return Model(path.stem, "mm", DEFAULT_COLOR, Placement(size_mm=size), [], path, mesh)
 
+
+register_document("model", DocumentFormat("arapp NURBS model", (".json",), load_model, ModelError,
+                                          "models/README.md"))
 
 KEYS = {"format", "version", "name", "units", "color", "placement", "surfaces", "description"}
 SURFACE_KEYS = {

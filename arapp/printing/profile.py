@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from arapp.exchange.files import DocumentFormat, register_document
 from arapp.exchange.jsonfile import read_json
 
 FORMAT = "arapp-printer/1"
@@ -237,3 +238,7 @@ def load_profile(path: str | Path | None = None) -> PrinterProfile:
             f"or a shipped profile name ({', '.join(shipped_profiles())})"
         )
     return parse_profile(_read_json(p), str(p), defaults=generic)
+
+
+register_document("printer", DocumentFormat("printer profile", (".json",), load_profile, ProfileError,
+                                            "docs/printer-profile.md"))
