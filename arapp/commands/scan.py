@@ -30,7 +30,7 @@ def add_arguments(parser):
     parser.add_argument("--nurbs", metavar="MODEL.json", help="also fit an editable NURBS model (surface of "
                         "revolution, else a bicubic patch) and write it as an arapp model JSON")
     parser.add_argument("--max-views", type=int, default=20, help="views used for dense matching (default 20)")
-    parser.add_argument("--voxel-mm", type=float, default=None, help="TSDF voxel, mm (default: object size / 110)")
+    parser.add_argument("--voxel-mm", type=float, default=None, help="TSDF voxel, mm (default: object size / 90)")
     parser.add_argument("--no-refine", action="store_true", help="skip the SIFT bundle adjustment")
     parser.add_argument("--max-frames", type=int, default=None, help="use at most N frames of the recording")
 

@@ -83,7 +83,9 @@ def stereo_depth(img_a, img_b, K, pose_a, pose_b, z_range: tuple[float, float], 
     d_min = max(0, int(np.floor(f * baseline / z_range[1])))
     d_max = int(np.ceil(f * baseline / z_range[0]))
     n_disp = int(np.ceil(max(16, d_max - d_min) / 16.0)) * 16
-    if n_disp > 512:
+    # SGBM needs the search to fit in the row (OpenCV allocates width - minDisparity - numDisparities)
+    n_disp = min(n_disp, (w // 2 - d_min) // 16 * 16)
+    if n_disp < 16 or n_disp > 512:
         return None
     map_a = cv2.initUndistortRectifyMap(K, None, R1, P1, (w, h), cv2.CV_32FC1)
     map_b = cv2.initUndistortRectifyMap(K, None, R2, P2, (w, h), cv2.CV_32FC1)

@@ -95,7 +95,7 @@ def object_region(points: np.ndarray, frame: BoardFrame, min_height: float = 0.0
     return lo, hi
 
 
-def object_masks(maps, frame: BoardFrame, lo, hi, min_height: float = 0.003, grow_px: int = 6):
+def object_masks(maps, frame: BoardFrame, lo, hi, min_height: float = 0.003, grow_px: int = 12):
     """Per depth map: the object's image region (pixels whose depth lies in the box above min_height),
     closed, holes filled and grown by grow_px (depth is missing at occluding edges)."""
     masks = []
@@ -119,7 +119,7 @@ def object_masks(maps, frame: BoardFrame, lo, hi, min_height: float = 0.003, gro
     return masks
 
 
-def fuse(maps, frame: BoardFrame, lo, hi, voxel: float, trunc: float, masks=None, hull_slack: int = 1,
+def fuse(maps, frame: BoardFrame, lo, hi, voxel: float, trunc: float, masks=None, hull_slack: int = 2,
          progress=None):
     """Fuse the depth maps into a closed signed field over the box; returns (field, origin_local, voxel).
     Negative inside. Grid layer k lies at height (k + 0.5) * voxel above the paper (so the cut is at h = 0)."""
@@ -129,31 +129,30 @@ def fuse(maps, frame: BoardFrame, lo, hi, voxel: float, trunc: float, masks=None
     g = [lo[a] + (np.arange(n[a]) + 0.5) * voxel for a in range(3)]
     Lx, Ly, Lz = np.meshgrid(*g, indexing="ij")
     L = np.c_[Lx.ravel(), Ly.ravel(), Lz.ravel()]
-    W = frame.to_world(L)
+    W = frame.to_world(L).astype(np.float32)
     tsdf = np.zeros(len(L), np.float32)
     weight = np.zeros(len(L), np.float32)
     outside_votes = np.zeros(len(L), np.int16)
     for k, dm in enumerate(maps):
-        cfw = np.linalg.inv(dm.pose)
+        cfw = np.linalg.inv(dm.pose).astype(np.float32)
         pc = W @ cfw[:3, :3].T + cfw[:3, 3]
         z = pc[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            u = np.round(dm.K[0, 0] * pc[:, 0] / z + dm.K[0, 2])
-            v = np.round(dm.K[1, 1] * pc[:, 1] / z + dm.K[1, 2])
         h, w = dm.depth.shape
-        inside = (z > 0) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
-        ui, vi = u[inside].astype(np.int64), v[inside].astype(np.int64)
-        d = np.zeros(len(L), np.float32)
-        d[inside] = dm.depth[vi, ui]
-        sdf = d - z
+        front = np.nonzero(z > 1e-3)[0]
+        zf = z[front]
+        u = np.rint(dm.K[0, 0] * pc[front, 0] / zf + dm.K[0, 2])
+        v = np.rint(dm.K[1, 1] * pc[front, 1] / zf + dm.K[1, 2])
+        ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+        idx, ui, vi, zi = front[ok], u[ok].astype(np.int64), v[ok].astype(np.int64), zf[ok]
+        d = dm.depth[vi, ui]
+        sdf = d - zi
         upd = (d > 0) & (sdf > -trunc)
+        j = idx[upd]
         val = np.clip(sdf[upd] / trunc, -1.0, 1.0)
-        tsdf[upd] = (tsdf[upd] * weight[upd] + val) / (weight[upd] + 1.0)
-        weight[upd] += 1.0
+        tsdf[j] = (tsdf[j] * weight[j] + val) / (weight[j] + 1.0)
+        weight[j] += 1.0
         if masks is not None and masks[k] is not None:
-            m = np.zeros(len(L), bool)
-            m[inside] = ~masks[k][vi, ui]
-            outside_votes += m
+            outside_votes[idx[~masks[k][vi, ui]]] += 1
         if progress is not None:
             progress("fusing", k + 1, len(maps))
     field = tsdf.copy()

@@ -32,14 +32,14 @@ Progress = Callable[[str, int, int], None]
 @dataclass
 class ScanOptions:
     """max_views: views used for depth; min_angle_deg: least angle between chosen views (seen from the
-    object); refine: run the SIFT bundle adjustment; voxel: TSDF voxel (m; None = object extent / 110);
+    object); refine: run the SIFT bundle adjustment; voxel: TSDF voxel (m; None = object extent / 90);
     z_range: depths SGBM searches (m); min_agree: depth maps that must confirm a depth."""
 
     max_views: int = 20
     min_angle_deg: float = 7.0
     refine: bool = True
     voxel: float | None = None
-    z_range: tuple[float, float] = (0.08, 1.5)
+    z_margin: float = 0.05
     min_agree: int = 2
     max_frames: int | None = None
 
@@ -96,18 +96,23 @@ def scan(source, camera, anchors, options: ScanOptions | None = None, progress: 
 
     t = time.perf_counter()
     target = look_at_point(chosen)
+    frame = fu.board_frame(anchors)
+    # depth search range: what lies within the board's reach of the look-at point (disparity range = time)
+    reach = float(np.max(np.linalg.norm(frame.to_world(np.c_[frame.outline, np.zeros(len(frame.outline))])
+                                        - target, axis=1))) + opt.z_margin
     pairs = dpt.choose_pairs(poses, target)
     maps = []
     for k, (i, j) in enumerate(pairs):
         _check(cancel)
-        dm = dpt.stereo_depth(chosen[i].image, chosen[j].image, K, poses[i], poses[j], opt.z_range, i)
+        dist = float(np.linalg.norm(poses[i][:3, 3] - target))
+        z_range = (max(0.02, dist - reach), dist + reach)
+        dm = dpt.stereo_depth(chosen[i].image, chosen[j].image, K, poses[i], poses[j], z_range, i)
         if dm is not None:
             maps.append(dm)
         if progress:
             progress("dense matching", k + 1, len(pairs))
     if len(maps) < 2:
         raise RuntimeError("no pair of views could be matched densely; circle the object at one height too")
-    frame = fu.board_frame(anchors)
     # only what stands on the board matters: the rest is not checked (saves time) and not kept
     def on_board(X):
         L = frame.to_local(X)
@@ -128,12 +133,12 @@ def scan(source, camera, anchors, options: ScanOptions | None = None, progress: 
         raise RuntimeError("nothing stands on the board; put the object on the printed board and scan again")
     lo, hi = region
     extent = float(np.max(hi - lo))
-    voxel = opt.voxel or float(np.clip(extent / 110.0, 0.0003, 0.005))
+    voxel = opt.voxel or float(np.clip(extent / 90.0, 0.0003, 0.005))
     trunc = max(3.0 * voxel, 0.002)
     masks = fu.object_masks(maps, frame, lo, hi)
     _check(cancel)
     field_, lo2, voxel = fu.fuse(maps, frame, lo, hi, voxel, trunc, masks,
-                                 hull_slack=max(1, len(maps) // 10), progress=progress)
+                                 hull_slack=max(2, len(maps) // 8), progress=progress)
     _check(cancel)
     mesh = fu.surface_from_field(field_, lo2, voxel, frame)
     timings["fuse_s"] = time.perf_counter() - t
