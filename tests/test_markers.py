@@ -72,7 +72,7 @@ def test_markers_command_writes_png_pdf_json(tmp_path, capsys):
     with Image.open(tmp_path / "m3.png") as im:
         assert im.info["dpi"][0] == pytest.approx(100, abs=0.5)
     blk = json.loads((tmp_path / "m3.anchors.json").read_text())
-    assert blk["anchors"][0] == {"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 3, "length": 0.05}
+    assert blk["anchors"][0] == {"kind": "aruco", "dictionary": "DICT_ARUCO_MIP_36h12", "id": 3, "length": 0.05}
     assert '"anchors"' in capsys.readouterr().out
     assert main(["markers", "board", "--marker-length", "0.2", "-o", str(tmp_path)]) == 2
     assert "does not fit" in capsys.readouterr().err

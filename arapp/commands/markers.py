@@ -2,10 +2,18 @@
 
 HELP = "write printable ArUco markers, GridBoards, ChArUco boards or QR codes (PDF + PNG, true scale) and their anchors JSON"
 
+# Markers of a dictionary whose codes are far apart (at least 12 of 36 bits differ, rotations included):
+# printed patterns that are not markers (a 4x4 "fragile glass" icon on a parcel decodes as DICT_4X4_50 id
+# 17) match one of its codes far less often than in the 4x4 dictionaries. See docs/markers.md.
+DEFAULT_DICTIONARY = "DICT_ARUCO_MIP_36h12"
+
 
 def add_arguments(parser):
     parser.add_argument("kind", choices=["aruco", "board", "charuco", "qr"], help="what to print")
-    parser.add_argument("--dictionary", default="DICT_4X4_50", help="ArUco dictionary (default DICT_4X4_50)")
+    parser.add_argument("--dictionary", default=DEFAULT_DICTIONARY,
+                        help=f"ArUco dictionary (default {DEFAULT_DICTIONARY}: 6x6 bits, codes at least 12 bits apart, "
+                        "so packaging icons and other printed squares are not taken for markers as 4x4 ones are; "
+                        "any DICT_* name works, and recordings keep the dictionary they state; see docs/markers.md)")
     parser.add_argument("--id", type=int, default=0, help="aruco: marker id (default 0)")
     parser.add_argument("--length", type=float, default=0.06,
                         help="aruco / qr: side in metres, black border / symbol without quiet zone (default 0.06)")
@@ -42,7 +50,7 @@ def run(args) -> int:
         name = f"board_{args.dictionary}_{args.markers_x}x{args.markers_y}_{ml * 1000:g}mm"
     elif args.kind == "charuco":
         ml = args.marker_length if args.marker_length is not None else 0.022
-        block = {"kind": "charuco", "dictionary": args.dictionary if args.dictionary != "DICT_4X4_50" else "DICT_5X5_100",
+        block = {"kind": "charuco", "dictionary": args.dictionary,
                  "squares_x": args.squares_x, "squares_y": args.squares_y, "square_length": args.square_length,
                  "marker_length": ml, "first_id": args.first_id}
         name = f"charuco_{block['dictionary']}_{args.squares_x}x{args.squares_y}_{args.square_length * 1000:g}mm"
