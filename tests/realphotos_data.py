@@ -214,6 +214,7 @@ class QRCheck:
     text: str
     classic: bool  # cv2.QRCodeDetector decodes the code's text
     arapp: bool  # arapp gives a pose with the code as its anchor
+    ms: float = 0.0  # arapp's time for the photo (one frame: search, decode, pose)
 
 
 def qr_anchor_check(name: str) -> QRCheck:
@@ -229,4 +230,4 @@ def qr_anchor_check(name: str) -> QRCheck:
         f = float(w)
     cam = Camera([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]], None, w, h)
     res = AnchorTracker(parse_anchors([{"kind": "qr", "text": text, "length": 0.05}]), cam, filter=False).process(gray, 0.0)
-    return QRCheck(name, text, classic, res.raw_world_from_camera is not None and res.anchors_seen == [0])
+    return QRCheck(name, text, classic, res.raw_world_from_camera is not None and res.anchors_seen == [0], res.ms)

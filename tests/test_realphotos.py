@@ -29,9 +29,9 @@ def test_arapp_finds_the_markers_opencv_finds_and_no_others(name):
     # an id OpenCV sees more than once (the photos that put four views side by side, the diamonds) is
     # ambiguous for a pose; arapp drops it on purpose. Every other marker must be found, and nothing else.
     assert m.arapp == m.opencv_single, (sorted(m.arapp ^ m.opencv_single))
-    # the same marker, not another square nearby: corners within a tenth of the marker side
-    # (measured: at most 2.8 px on 30-60 px markers of the blurred 640x480 photos, 0.05 px on the sharp scan)
-    assert m.worst_corner_fraction < 0.1, m.worst_corner_fraction
+    # the same marker, not another square nearby (which would be a whole side away): corners within 30 % of
+    # the side (measured: 9.4 % on the ~20 px markers of the four-view photos, 0 on the sharp scan)
+    assert m.worst_corner_fraction < 0.3, m.worst_corner_fraction
 
 
 def test_board_pose_agrees_with_opencv_within_what_the_corners_allow():
