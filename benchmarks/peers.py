@@ -61,9 +61,11 @@ def measure_qr_calls(frames, text: str) -> dict:
 
 
 def choose_qr_call(measured: dict) -> str:
-    """The fastest call among those that decode at least 95 % as many frames as the best one."""
+    """The fastest call among those that decode at least 90 % as many frames as the best one (OpenCV's
+    ArUco-based QR detector is about twice as fast as the classic one and misses a few frames the classic
+    one decodes)."""
     best = max(h for h, _ in measured.values())
-    ok = [n for n, (h, _) in measured.items() if h >= 0.95 * best]
+    ok = [n for n, (h, _) in measured.items() if h >= 0.9 * best]
     return min(ok, key=lambda n: measured[n][1])
 
 
