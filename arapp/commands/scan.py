@@ -21,7 +21,7 @@ def add_arguments(parser):
     parser.add_argument("--source", help="scan live from a camera instead: v4l2:0, depthai, a video file ...")
     parser.add_argument("--calibration", help="OpenCV calibration YAML for --source cameras that need one")
     parser.add_argument("--anchors", help="JSON file with the anchors list (as in session.json) for --source; "
-                        "default: one aruco DICT_4X4_50 id 0 of 0.05 m")
+                        "default: a recording's own, else one aruco DICT_4X4_50 id 0 of 0.05 m")
     parser.add_argument("--seconds", type=float, default=None, help="with --source (required there): capture for S seconds while circling the object")
     parser.add_argument("-o", "--output", required=True, help="mesh to write: .ply, .stl or .obj")
     parser.add_argument("--print", dest="print_mm", action="store_true",
@@ -119,8 +119,10 @@ def run(args) -> int:
 
         if args.seconds is None:
             raise ValueError("--source needs --seconds S: how long to capture while circling the object")
-        source = _TimedSource(open_source(args.source, calibration=args.calibration), args.seconds)
-        anchors = _anchors_for_source(args)
+        live = open_source(args.source, calibration=args.calibration)
+        source = _TimedSource(live, args.seconds)
+        session = getattr(live, "session", None)   # a recording given as --source brings its anchors
+        anchors = _anchors_for_source(args) if args.anchors or session is None else session.anchors
     camera = source.camera if hasattr(source, "camera") else source.src.camera
     # SIGTERM stops like Ctrl-C: nothing is written until the mesh is complete (temp file + rename)
     old = signal.signal(signal.SIGTERM, lambda *a: cancel.set())
