@@ -19,7 +19,7 @@ from typing import Callable
 from tracking.camera import Camera
 from tracking.errors import CalibrationError, SessionError
 from tracking.session import load_session
-from tracking.sources.recording import read_frames_csv
+from tracking.sources import read_frames_csv
 
 
 def _session(path: Path):
