@@ -13,10 +13,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from arapp.geometry import load_model
 from arapp.placement import Placement, placement_from_any, world_from_model
 from tracking.camera import Camera
 from tracking.poses import invert
 from tracking.session import AnchorSpec
+from tracking.tracker import Tracker
 
 MODES = ("shaded", "wireframe", "isolines", "translucent")
 STATE_COLOURS = {"marker": (80, 220, 80), "slam": (60, 200, 255), "lost": (60, 60, 255)}
@@ -59,8 +61,6 @@ class Pipeline:
         status_line: bool = True,
         tracker_params: dict | None = None,
     ):
-        from tracking.tracker import Tracker
-
         self.camera = camera
         self.anchors = anchors
         self.tracker = Tracker(camera, anchors, slam=slam, **(tracker_params or {}))
@@ -130,6 +130,8 @@ class Pipeline:
     @property
     def renderer(self):
         if self._renderer is None:
+            # here, not at the top: PyOpenGL binds its platform on import, and processes that import this
+            # module without drawing (the GUI process, for FrameResult) must not load GL at all
             from arapp.render import OverlayRenderer
 
             c = self.camera
@@ -190,6 +192,4 @@ def draw_status(image: np.ndarray, state: str, fps: float, markers: int, inliers
 
 def load_display_model(path: str | Path):
     """Load a model file for display (NURBS JSON or a mesh file); errors name the file and the problem."""
-    from arapp.geometry import load_model
-
     return load_model(path)

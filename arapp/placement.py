@@ -18,10 +18,14 @@ so what is printed is what was seen.
 
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import replace
 
-from arapp.geometry.model import Placement
+import numpy as np
+import trimesh
+
+from arapp.geometry.model import Model, Placement
 from tracking.poses import make_pose
+from tracking.slam.flow import lift_to_plane
 from tracking.session import AnchorSpec
 
 __all__ = ["Placement", "placement_from_any", "placement_from_model", "world_from_placement", "world_from_model",
@@ -55,10 +59,6 @@ def world_from_model(anchor: AnchorSpec, model) -> np.ndarray:
 
 def placement_from_model(bounds: np.ndarray, placement, unit: str = "mm") -> np.ndarray:
     """4x4 similarity from a mesh with these (2, 3) bounds to the placement frame, as `Model.placement_matrix`."""
-    import trimesh
-
-    from arapp.geometry.model import Model
-
     box = trimesh.creation.box(bounds=np.asarray(bounds, dtype=float))
     return Model("placed", placement=placement_from_any(placement), source_mesh=box).placement_matrix(unit)
 
@@ -68,8 +68,6 @@ def placement_point_at_pixel(camera, world_from_camera: np.ndarray, anchor: Anch
     """The point (x, y) in millimetres of the placement frame's z = 0 plane (the anchor's paper) seen at
     `pixel` (u, v: distorted image pixels of `camera`, centres at integers) from `world_from_camera`,
     or None when that ray does not meet the paper in front of the camera (at the horizon or behind)."""
-    from tracking.slam.flow import lift_to_plane
-
     placement_from_camera = np.linalg.inv(world_from_placement(anchor)) @ np.asarray(world_from_camera, float)
     X, ok = lift_to_plane(camera, placement_from_camera, np.asarray(pixel, float).reshape(1, 2),
                           max_depth_ratio=1e3, min_grazing_deg=2.0)
@@ -81,8 +79,6 @@ def dragged_placement(start: Placement, grab_mm, now_mm, mode: str = "move") -> 
     see `placement_point_at_pixel`), starting from `start`. mode "move": the model follows the pointer
     in the paper's plane (height kept). mode "turn": the model turns about its own vertical axis (the
     paper's normal through its offset) by the angle the pointer swept around it."""
-    from dataclasses import replace
-
     g, n = np.asarray(grab_mm, float), np.asarray(now_mm, float)
     ox, oy, oz = start.offset
     if mode == "move":

@@ -18,7 +18,11 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from arapp.pipeline import Pipeline, load_display_model
+from arapp.toolpath_overlay import toolpath_overlay
+from tracking.evaluation import evaluate
 from tracking.poses import read_tum, tum_line
+from tracking.sources import RecordingSource
 
 
 @dataclass
@@ -42,9 +46,6 @@ def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | 
     progress(done, total) is called after each frame; `cancel` is an optional
     threading.Event that stops the replay early (outputs stay consistent).
     """
-    from arapp.pipeline import Pipeline, load_display_model
-    from tracking.sources import RecordingSource
-
     options = options or ReplayOptions()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -56,8 +57,6 @@ def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | 
     pipeline = Pipeline(camera, anchors, model=model, placement=options.placement, mode=options.mode,
                         slam=options.slam, draw=options.video, tracker_params=options.tracker_params)
     if options.toolpaths:
-        from arapp.toolpath_overlay import toolpath_overlay
-
         line_sets, world_from_bed = toolpath_overlay(options.toolpaths, options.printer, anchors, options.layer)
         pipeline.set_toolpaths(line_sets, world_from_bed)
 
@@ -135,8 +134,6 @@ def _report(recording, out: Path, n: int, states: list[str], wall: float, interr
     gt_path = Path(recording) / "groundtruth.tum"
     est_path = out / "poses.tum"
     if gt_path.is_file():
-        from tracking.evaluation import evaluate
-
         gt_t, gt_p = read_tum(gt_path)
         est_t, est_p = read_tum(est_path)
         if last_t is not None:  # a partial replay is judged on the frames it covered
@@ -157,6 +154,8 @@ def _report(recording, out: Path, n: int, states: list[str], wall: float, interr
 
 def _plot(path: Path, gt_t, gt_p, est_t, est_p) -> None:
     """Top view and height-over-time of the camera trajectory, estimate against ground truth."""
+    # here, not at the top: matplotlib is slow to import and only the plot needs it; the backend must be
+    # chosen before pyplot is imported
     import matplotlib
 
     matplotlib.use("Agg")

@@ -13,6 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
+from arapp.printing import load_profile
+from arapp.printing.gcode import parse_gcode
+from arapp.render.modes import LineSet
+
 # RGBA per move kind: perimeters warm, infill cool, travel faint, skirt grey.
 KIND_COLOURS = {
     "perimeter": (1.0, 0.55, 0.1, 1.0),
@@ -66,8 +70,6 @@ def toolpath_line_sets(layers, bed_size: tuple[float, float, float], layer: int 
     Segments are grouped by kind and role so a whole print is a handful of
     line sets (each uploaded to the GPU once).
     """
-    from arapp.render.modes import LineSet
-
     width, depth, height = bed_size
     top = len(layers) - 1 if layer is None else min(int(layer), len(layers) - 1)
     groups: dict[tuple, list] = {}  # (colour, width_px) -> list of (N, 2, 3) segment arrays
@@ -104,9 +106,6 @@ def toolpath_overlay(gcode_path: str | Path, printer_path: str | Path | None, an
 
     anchors: the session's anchors; the first is the bed anchor (its frame is the world).
     """
-    from arapp.printing import load_profile
-    from arapp.printing.gcode import parse_gcode
-
     path = Path(gcode_path)
     if not path.is_file():
         raise FileNotFoundError(f"toolpaths: {path} does not exist; slice a model first (arapp slice MODEL -o {path})")

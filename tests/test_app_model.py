@@ -135,3 +135,96 @@ def test_a_whole_session_runs_without_qt(tmp_path):
     assert r["printed_in_order"] and r["printed"] > 100
     assert r["progress"] == pytest.approx(100.0)
 
+
+
+# -- the app model's parts, alone (no engine threads) ----------------------------------------------------
+
+
+class FakeEngine:
+    """Records the commands a Session sends; the engine interface Session uses."""
+
+    def __init__(self, spec, **options):
+        self.spec, self.options, self.sent = spec, options, []
+        self.playing = True
+        self.running = False
+
+    def send(self, command):
+        self.sent.append(command)
+
+    def start(self):
+        self.running = True
+
+    def stop(self, wait=0.0):
+        self.running = False
+
+    def take(self):
+        return None
+
+
+def fake_session():
+    from arapp.app.session import Session
+
+    engines = []
+    session = Session(lambda spec, **o: engines.append(FakeEngine(spec, **o)) or engines[-1])
+    return session, engines
+
+
+def test_events_call_their_callbacks_in_order_until_disconnected():
+    from arapp.app.events import Event
+
+    ev, calls = Event("x"), []
+    first = ev.connect(lambda a: calls.append(("first", a)))
+    ev.connect(lambda a: calls.append(("second", a)))
+    ev.emit(1)
+    ev.disconnect(first)
+    ev.emit(2)
+    assert calls == [("first", 1), ("second", 1), ("second", 2)]
+
+
+def test_commands_cross_a_process_boundary_without_the_model():
+    import pickle
+
+    from arapp.app import commands as cmd
+    from arapp.placement import Placement
+
+    place = Placement(30.0, (1.0, 2.0, 0.0), (0.0, 0.0, 45.0))
+    c = cmd.SetModel(3, "models/sphere.json", {(0, 1, 1): ((1.0, 2.0, 3.0), 0.5)}, place, "wireframe",
+                     model=object())
+    sent = pickle.loads(pickle.dumps(c.for_transfer()))
+    assert sent.model is None and sent == c  # `model` takes no part in equality: the rest is the same
+    assert sent.placement == place and sent.edits[(0, 1, 1)] == ((1.0, 2.0, 3.0), 0.5)
+    with pytest.raises(ValueError, match="positive"):
+        cmd.SetSpeed(0.0)
+
+
+def test_the_session_keeps_a_typed_placement_and_tells_the_engine():
+    from arapp.app import commands as cmd
+    from arapp.placement import Placement
+
+    session, engines = fake_session()
+    seen = []
+    session.events.placement_changed.connect(seen.append)
+    session.open_source(str(RECORDING))
+    engine = engines[-1]
+    assert engine.spec == str(RECORDING) and engine.running
+    with pytest.raises(TypeError, match="Placement"):
+        session.set_placement({"size_mm": 20.0})
+    session.model = object()  # as if loaded (set_model needs a real one; placement only needs "a model")
+    session.placement = Placement(50.0)
+    session.scale_by(2)  # two wheel notches: 1.1 ** 2 times the size (the rule of Session.scale_by)
+    assert session.placement.size_mm == pytest.approx(60.5)
+    session.scale_by(200)
+    assert session.placement.size_mm == 1000.0  # at most one metre
+    placements = [c.placement for c in engine.sent if isinstance(c, cmd.SetPlacement)]
+    assert placements == seen and [p.size_mm for p in placements] == pytest.approx([60.5, 1000.0])
+    with pytest.raises(ValueError, match="display mode"):
+        session.set_mode("sparkly")
+
+
+def test_dropped_paths_are_models_or_sources():
+    from arapp.app.session import Session
+
+    assert Session.classify_path("models/vase.json") == ("model", "models/vase.json")
+    assert Session.classify_path("part.STL") == ("model", "part.STL")
+    assert Session.classify_path("recordings/board_orbit/session.json") == ("source", "recordings/board_orbit")
+    assert Session.classify_path("clip.mp4") == ("source", "clip.mp4")

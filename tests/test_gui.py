@@ -442,20 +442,25 @@ def test_selected_control_point_is_ringed_in_the_view(qtbot, window, recording):
     panel = window.model_panel
     panel.u_index.setValue(4)
     panel.v_index.setValue(4)
-    qtbot.wait(400)
-    shown = window.last_shown
-    # where the corner control point projects, the painted view shows the ring's colour (BGR 0, 240, 255)
-    info = window.source_info
-    p = np.append(window.model.surfaces[0].control_points[4, 4], 1.0)
-    cam = (invert(shown.result.world_from_camera) @ world_from_model(info.anchors[0], window.model) @ p)[:3]
-    uv = info.camera.project(cam[None, :]).reshape(-1)
-    q = window.view.image()
-    s = q.width() / info.camera.width
-    x, y = int(round(uv[0] * s)), int(round(uv[1] * s))
     from PySide6.QtGui import QColor
 
-    colour = QColor(q.pixel(x, y))
-    assert (colour.red(), colour.green(), colour.blue()) == pytest.approx((255, 240, 0), abs=40)
+    def ring_colour():
+        """The painted view's colour where the corner control point projects in the frame shown."""
+        shown = window.last_shown
+        info = window.source_info
+        p = np.append(window.model.surfaces[0].control_points[4, 4], 1.0)
+        cam = (invert(shown.result.world_from_camera) @ world_from_model(info.anchors[0], window.model) @ p)[:3]
+        uv = info.camera.project(cam[None, :]).reshape(-1)
+        q = window.view.image()
+        s = q.width() / info.camera.width
+        colour = QColor(q.pixel(int(round(uv[0] * s)), int(round(uv[1] * s))))
+        return (colour.red(), colour.green(), colour.blue()), shown, uv
+
+    # the paused frame is drawn again with the ring (BGR 0, 240, 255) once the selection reaches the engine
+    # (under load that takes a moment)
+    qtbot.waitUntil(lambda: ring_colour()[0] == pytest.approx((255, 240, 0), abs=40), timeout=10000)
+    colour, shown, uv = ring_colour()
+    assert colour == pytest.approx((255, 240, 0), abs=40)
     # and the full-size composite the pipeline made is untouched by the ring
     assert not np.all(shown.result.image[int(uv[1]), int(uv[0])] == (0, 240, 255))
 

@@ -28,6 +28,7 @@ class ListSource:
         self.closed = False
         self.camera = object()
         self.session = None
+        self.live, self.seekable = False, True  # as tracking.sources.Source says it
 
     def __iter__(self):
         return self
@@ -148,7 +149,7 @@ class CountingSource(ListSource):
         self.decoded = 0
         self.period = period
         if live:
-            self.kind = "v4l2"  # a camera: read continuously, never seeks
+            self.live, self.seekable = True, False  # a camera: read continuously, never seeks
 
     def __next__(self):
         if self.period:
@@ -304,6 +305,7 @@ def test_a_camera_lost_mid_stream_is_reported_not_raised():
 
         def __init__(self):
             super().__init__(5)
+            self.live, self.seekable = True, False
             self.error = None
 
         def __next__(self):

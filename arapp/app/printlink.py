@@ -1,7 +1,7 @@
 """The app's use of the printer links (arapp.printing.link): one job API for serial and OctoPrint.
 
-A `PrintJob` runs `connect()` and `print_gcode()` of a `SerialPrinter` or an
-`OctoPrintLink` in its own thread and reports `PrintEvent`s through a callback
+A `PrintJob` runs `connect()` and `print_gcode()` of the link `make_link(target)`
+makes (arapp.printing.link: serial or OctoPrint) in its own thread and reports `PrintEvent`s through a callback
 called in that thread (the dialog forwards them to the UI thread). Pause,
 resume and cancel never block the caller: OctoPrint's are HTTP requests, so
 they run in a short-lived thread of their own.
@@ -15,21 +15,9 @@ from dataclasses import dataclass
 
 from serial.tools import list_ports
 
-from arapp.printing.link import LinkLost, PrinterHalted
-from arapp.printing.link.octoprint import OctoPrintLink, load_api_key
-from arapp.printing.link.serial_link import SerialPrinter
+from arapp.printing.link import LinkLost, OctoPrintTarget, PrinterHalted, SerialTarget, make_link
 
-
-@dataclass
-class SerialTarget:
-    port: str
-    baud: int = 115200
-
-
-@dataclass
-class OctoPrintTarget:
-    url: str
-    api_key_file: str
+__all__ = ["SerialTarget", "OctoPrintTarget", "PrintEvent", "PrintJob", "start_job", "serial_ports"]
 
 
 @dataclass
@@ -103,25 +91,11 @@ def temperatures(progress) -> dict:
     return out
 
 
-def make_link(target, profile=None, job_path=None):
-    """The link object for a target (not connected yet). Raises ValueError for a target the user left
-    incomplete, ApiKeyError/OSError for an unreadable key file."""
-    if isinstance(target, OctoPrintTarget):
-        if not target.url:
-            raise ValueError("give the OctoPrint URL (e.g. http://octopi.local) and the API key file")
-        if not target.api_key_file:
-            raise ValueError("give the file holding OctoPrint's API key (Settings > API in OctoPrint)")
-        return OctoPrintLink(target.url, load_api_key(target.api_key_file), job_path=job_path)
-    if not target.port:
-        raise ValueError("choose the printer's serial port (e.g. /dev/ttyUSB0), or use OctoPrint")
-    bed_height = getattr(getattr(profile, "bed", None), "height", None)
-    return SerialPrinter(target.port, target.baud, bed_height=bed_height, job_path=job_path)
-
-
 def start_job(target, gcode: str, profile, callback, *, job_path=None, gcode_path: str = "") -> "PrintJob":
     """Start printing `gcode` on `target`; callback(PrintEvent) from the job's thread. Raises ValueError/OSError
     at once for a target that cannot work (no port, no URL, unreadable key file)."""
-    job = PrintJob(make_link(target, profile, job_path), gcode, callback, job_path=job_path, gcode_path=gcode_path)
+    job = PrintJob(make_link(target, profile=profile, job_path=job_path), gcode, callback, job_path=job_path,
+                   gcode_path=gcode_path)
     job.start()
     return job
 
@@ -178,11 +152,9 @@ class PrintJob:
             self._control("resume")
 
     def cancel(self) -> None:
-        # print_gcode watches the event (both links); the serial link's own cancel() only sets a flag and
-        # wakes it at once. OctoPrint's is an HTTP request that print_gcode makes itself on the event.
+        # every link's print_gcode watches the event (at least 4 times a second, arapp.printing.link.base)
+        # and stops safely itself; OctoPrint's cancel request is made there, off this thread
         self._cancel.set()
-        if self._connected.is_set() and isinstance(self.link, SerialPrinter):
-            self.link.cancel()
 
     # -- the job thread ---------------------------------------------------------------------
     def _run(self) -> None:

@@ -28,15 +28,14 @@ from arapp.app.events import Events
 from arapp.app.print_session import PrintSession
 from arapp.app.runner import ImmediateRunner
 from arapp.app.sourcespec import display_name
-from arapp.pipeline import load_display_model
+from arapp.exchange.meshes import is_mesh_path
+from arapp.pipeline import MODES, load_display_model
 from arapp.placement import Placement, dragged_placement, placement_point_at_pixel
 from tracking.session import parse_anchors
 
-MESH_SUFFIXES = {".stl", ".obj", ".ply", ".3mf", ".glb"}
 RECENT_MAX = 8
 DEFAULT_ANCHORS = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
                     "marker_length": 0.04, "separation": 0.01, "first_id": 0}]
-MODES = ("shaded", "wireframe", "isolines", "translucent")
 
 
 class MemorySettings:
@@ -210,7 +209,7 @@ class Session:
         """("model", path) for a model file, else ("source", what to open): a dropped or given path, a model
         file (a mesh or NURBS JSON), a recording folder (or its session.json) or a video."""
         p = Path(path)
-        if p.suffix.lower() in MESH_SUFFIXES or (p.suffix.lower() == ".json" and p.name != "session.json"):
+        if is_mesh_path(p) or (p.suffix.lower() == ".json" and p.name != "session.json"):
             return "model", str(p)
         return "source", str(p.parent if p.name == "session.json" else p)
 

@@ -15,23 +15,22 @@ import os
 from pathlib import Path
 
 from PySide6.QtCore import QSettings, Qt, QTimer, Signal
-from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow, QMessageBox, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow, QVBoxLayout, QWidget
 
 from arapp.app import sheets
 from arapp.app.editing import library_thumbnails
 from arapp.app.paint_stats import PaintStats
 from arapp.app.session import Session, as_bool
-from arapp.app.sourcespec import video_spec
+from arapp.gui.errors import ErrorBoxes
 from arapp.gui.menus import build_menus, update_recent_menus
 from arapp.gui.panels.model import MODEL_FILTER, ModelPanel, library_files
 from arapp.gui.panels.replay import ReplayBar
 from arapp.gui.panels.tracking import AnchorsDialog, TrackingPanel
 from arapp.gui.print_dialog import PrintDialog
-from arapp.gui.remote import RemoteEngine
-from arapp.gui.source_dialog import SourceDialog, ask_recording, ask_video
+from arapp.gui.source_dialog import SourceDialog, ask_recording, ask_video_spec
 from arapp.gui.tasks import QtRunner, Task, init_ui_bridge, on_ui
 from arapp.gui.view import VideoView
-from arapp.gui.workers import Engine
+from arapp.gui.workers import make_engine
 
 
 def app_settings() -> QSettings:
@@ -58,7 +57,7 @@ class MainWindow(QMainWindow):
         self.engine_kind = os.environ.get("ARAPP_GUI_ENGINE", "process")
         self.full_frames = False  # also hand over full-size composited and raw frames (for checks)
         self.error_sink = None  # callable(title, message) replacing dialogs (screenshot mode)
-        self._open_boxes: dict[tuple[str, str], QMessageBox] = {}
+        self.error_boxes = ErrorBoxes(self)
         self._awaiting_paint = None
         self.stats = PaintStats()
         self._print_dialog = None
@@ -152,43 +151,24 @@ class MainWindow(QMainWindow):
         if geometry is not None:
             self.restoreGeometry(geometry)
 
-    # -- the engine: the thread or process engine, wired to the session's handlers ---------------
-    def _make_engine(self, spec: str, *, name: str, anchors: list, speed: float, loop: bool, handlers):
-        if self.engine_kind == "threads":
-            engine = Engine(spec, name=name, anchors=anchors, speed=speed, loop=loop, parent=self)
-        else:
-            engine = RemoteEngine(spec, name=name, anchors_json=[a.to_dict() for a in anchors], speed=speed,
-                                  loop=loop, full_frames=self.full_frames, parent=self)
-        engine.opened.connect(handlers.opened)
-        engine.frame_ready.connect(handlers.ready)
-        engine.error.connect(handlers.error)
-        engine.ended.connect(handlers.ended)
-        engine.recorded.connect(handlers.recorded)
-        engine.toolpaths_shown.connect(handlers.toolpaths)
-        return engine
+    def _make_engine(self, spec: str, **options):
+        """The session's engine factory: the process engine (default) or the thread engine."""
+        return make_engine(self.engine_kind, spec, full_frames=self.full_frames, parent=self, **options)
 
     # -- errors ------------------------------------------------------------------------
     def show_error(self, title: str, message: str) -> None:
         self.session.report(title, message)
 
     def _show_error(self, title: str, message: str) -> None:
-        """Tell the user, with the specific message. Non-modal, so frames keep flowing; a message already
-        on screen is not stacked again."""
+        """Tell the user, with the specific message (status bar, and a non-modal box, or `error_sink`)."""
         self.statusBar().showMessage(f"{title}: {message}", 10000)
         if self.error_sink is not None:
             self.error_sink(title, message)
-            return
-        key = (title, message)
-        if key in self._open_boxes:
-            return
-        box = QMessageBox(QMessageBox.Icon.Critical, title, message, QMessageBox.StandardButton.Ok, self)
-        box.setAttribute(Qt.WidgetAttribute.WA_DeleteOnClose, True)
-        box.finished.connect(lambda _r, k=key: self._open_boxes.pop(k, None))
-        self._open_boxes[key] = box
-        box.open()
+        else:
+            self.error_boxes.show(title, message)
 
-    def open_error_boxes(self) -> list[QMessageBox]:
-        return list(self._open_boxes.values())
+    def open_error_boxes(self) -> list:
+        return self.error_boxes.open_boxes()
 
     # -- sources -----------------------------------------------------------------------
     def open_source(self, spec: str) -> None:
@@ -231,15 +211,9 @@ class MainWindow(QMainWindow):
             self.open_source(folder)
 
     def choose_video(self) -> None:
-        chosen = ask_video(self)
-        if chosen is None:
-            return
-        video, calib = chosen
-        if not calib:
-            self.show_error("Calibration needed", f"{video}: tracking needs the camera's calibration; "
-                            "choose the YAML written by 'arapp calibrate' or OpenCV's calibration tools")
-            return
-        self.open_source(video_spec(video, calib))
+        spec = ask_video_spec(self, self.show_error)
+        if spec:
+            self.open_source(spec)
 
     # -- frames ------------------------------------------------------------------------
     def _frame(self, shown) -> None:

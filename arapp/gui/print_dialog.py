@@ -11,41 +11,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from PySide6.QtCore import QStandardPaths, Qt, Signal
-from PySide6.QtWidgets import (
-    QCheckBox, QComboBox, QDialog, QDoubleSpinBox, QFileDialog, QFormLayout, QGroupBox, QHBoxLayout, QLabel,
-    QLineEdit, QProgressBar, QPushButton, QRadioButton, QSlider, QSpinBox, QVBoxLayout,
-)
+from PySide6.QtCore import QStandardPaths, Signal
+from PySide6.QtWidgets import QDialog, QFileDialog, QLabel, QVBoxLayout
 
 from arapp.app import printlink
 from arapp.app.print_session import PrintSession, prune_slices
+from arapp.gui.print_widgets import (
+    OTHER_PROFILE, preview_box, restore_settings, send_box, settings_values, slicing_box,
+)
 from arapp.gui.temperature_graph import TemperatureGraph
-from arapp.printing import MATERIALS, SliceSettings
+from arapp.printing import SliceSettings
 from arapp.printing.gcode import format_duration
-from arapp.printing.profile import shipped_profiles
 
 __all__ = ["PrintDialog", "TemperatureGraph", "prune_slices"]
-OTHER_PROFILE = "Other profile file..."
-SETTINGS_KEYS = ("profile", "material", "layer_height", "infill", "perimeters", "octoprint_url", "api_key_file",
-                 "link")
-
-
-def _button(text: str, slot, enabled: bool = True) -> QPushButton:
-    b = QPushButton(text)
-    b.clicked.connect(slot)
-    b.setEnabled(enabled)
-    return b
-
-
-def _spin(box, lo, hi, suffix="", step=None, decimals=None):
-    box.setRange(lo, hi)
-    if step is not None:
-        box.setSingleStep(step)
-    if decimals is not None:
-        box.setDecimals(decimals)
-    if suffix:
-        box.setSuffix(suffix)
-    return box
 
 
 def _session_attr(name: str) -> property:
@@ -81,9 +59,8 @@ class PrintDialog(QDialog):
         self.solid_label = QLabel("Preparing the printable solid...")
         lay.addWidget(self.model_label)
         lay.addWidget(self.solid_label)
-        lay.addWidget(self._slicing_box())
-        lay.addWidget(self._preview_box())
-        lay.addWidget(self._send_box())
+        for box in (slicing_box(self), preview_box(self), send_box(self)):
+            lay.addWidget(box)
         ev = ps.events
         ev.solid_ready.connect(self._solid_done)
         ev.slice_progress.connect(self._slice_progress)
@@ -92,111 +69,9 @@ class PrintDialog(QDialog):
         ev.preview_drawn.connect(self.preview_shown)
         ev.print_event.connect(self._show_print_event)
         ev.error.connect(self.error.emit)
-        self._restore()
+        restore_settings(self, settings)
         self.refresh_ports()
         ps.make_solid()
-
-    # -- widgets -------------------------------------------------------------------------
-    def _slicing_box(self) -> QGroupBox:
-        box = QGroupBox("Slicing")
-        form = QFormLayout(box)
-        self.profile = QComboBox()
-        self.profile.addItems(shipped_profiles())
-        self.profile.addItem(OTHER_PROFILE)
-        self.profile.activated.connect(self._profile_activated)
-        self.material = QComboBox()
-        self.material.addItems(list(MATERIALS))
-        self.layer_height = _spin(QDoubleSpinBox(), 0.05, 0.6, " mm", step=0.05, decimals=2)
-        self.infill = _spin(QSpinBox(), 0, 100, " %")
-        self.perimeters = _spin(QSpinBox(), 1, 10)
-        for label, w in (("Printer", self.profile), ("Material", self.material), ("Layer height", self.layer_height),
-                         ("Infill", self.infill), ("Perimeters", self.perimeters)):
-            form.addRow(label, w)
-        row = QHBoxLayout()
-        self.slice_button = _button("Slice", self.start_slice)
-        self.cancel_slice_button = _button("Cancel", self.cancel_slice, False)
-        self.save_button = _button("Save G-code...", self.save_gcode, False)
-        for b in (self.slice_button, self.cancel_slice_button, self.save_button):
-            row.addWidget(b)
-        form.addRow(row)
-        self.slice_progress = QProgressBar()
-        self.slice_progress.setRange(0, 1000)
-        self.slice_progress.setValue(0)
-        form.addRow(self.slice_progress)
-        self.slice_label = QLabel("")
-        self.slice_label.setWordWrap(True)
-        form.addRow(self.slice_label)
-        return box
-
-    def _preview_box(self) -> QGroupBox:
-        prev = QGroupBox("Print preview on the bed (AR view)")
-        pf = QVBoxLayout(prev)
-        self.preview_check = QCheckBox("Show the toolpaths on the printer bed")
-        self.preview_check.setEnabled(False)
-        self.preview_check.toggled.connect(self._preview_toggled)
-        pf.addWidget(self.preview_check)
-        lrow = QHBoxLayout()
-        self.layer_slider = QSlider(Qt.Orientation.Horizontal)
-        self.layer_slider.setRange(0, 0)
-        self.layer_slider.setEnabled(False)
-        self.layer_slider.valueChanged.connect(self._layer_changed)
-        self.layer_label = QLabel("slice first")
-        self.layer_label.setMinimumWidth(170)
-        lrow.addWidget(QLabel("Layer"))
-        lrow.addWidget(self.layer_slider, 1)
-        lrow.addWidget(self.layer_label)
-        pf.addLayout(lrow)
-        self.preview_warning = QLabel("")
-        self.preview_warning.setWordWrap(True)
-        self.preview_warning.setStyleSheet("color: #c01010; font-weight: bold")
-        self.preview_warning.setVisible(False)
-        pf.addWidget(self.preview_warning)
-        return prev
-
-    def _send_box(self) -> QGroupBox:
-        send = QGroupBox("Send to printer")
-        sf = QFormLayout(send)
-        self.use_serial = QRadioButton("USB serial")
-        self.use_serial.setChecked(True)
-        self.port = QComboBox()
-        self.port.setEditable(True)
-        self.baud = QComboBox()
-        self.baud.setEditable(True)
-        self.baud.addItems(["115200", "250000", "57600"])
-        ports = QHBoxLayout()
-        ports.addWidget(self.port, 1)
-        ports.addWidget(self.baud)
-        ports.addWidget(_button("Refresh", self.refresh_ports))
-        sf.addRow(self.use_serial, ports)
-        self.use_octoprint = QRadioButton("OctoPrint")
-        self.octoprint_url = QLineEdit()
-        self.octoprint_url.setPlaceholderText("http://octopi.local")
-        self.api_key_file = QLineEdit()
-        self.api_key_file.setPlaceholderText("file holding the API key (mode 600)")
-        sf.addRow(self.use_octoprint, self.octoprint_url)
-        sf.addRow("API key file", self.api_key_file)
-        row2 = QHBoxLayout()
-        self.send_button = _button("Print", self.start_print, False)
-        self.pause_button = _button("Pause", self.toggle_pause, False)
-        self.cancel_print_button = _button("Cancel print", self.cancel_print, False)
-        for b in (self.send_button, self.pause_button, self.cancel_print_button):
-            row2.addWidget(b)
-        sf.addRow(row2)
-        self.print_progress = QProgressBar()
-        self.print_progress.setRange(0, 1000)
-        self.print_progress.setFormat("%p %")
-        sf.addRow(self.print_progress)
-        stats = QHBoxLayout()
-        self.percent_label, self.print_layer_label, self.eta_label = QLabel(""), QLabel(""), QLabel("")
-        for w in (self.percent_label, self.print_layer_label, self.eta_label):
-            stats.addWidget(w, 1)
-        sf.addRow(stats)
-        self.print_label = QLabel("")
-        self.print_label.setWordWrap(True)
-        sf.addRow(self.print_label)
-        self.temps = TemperatureGraph()
-        sf.addRow(self.temps)
-        return send
 
     # -- the session's state, as the window and tests read it --------------------------------
     model = _session_attr("model")
@@ -213,34 +88,12 @@ class PrintDialog(QDialog):
     work_dir = _session_attr("work_dir")
 
     # -- settings ----------------------------------------------------------------------
-    def _values(self) -> dict:
-        return {"profile": self.profile.currentText(), "material": self.material.currentText(),
-                "layer_height": self.layer_height.value(), "infill": self.infill.value(),
-                "perimeters": self.perimeters.value(), "octoprint_url": self.octoprint_url.text(),
-                "api_key_file": self.api_key_file.text(),
-                "link": "octoprint" if self.use_octoprint.isChecked() else "serial"}
-
-    def _restore(self) -> None:
-        s = self.settings
-        get = (lambda k, d: s.value(f"print/{k}", d)) if s is not None else (lambda k, d: d)
-        idx = self.profile.findText(str(get("profile", "generic")))
-        if idx >= 0:
-            self.profile.setCurrentIndex(idx)
-        self.material.setCurrentText(str(get("material", "PLA")))
-        self.layer_height.setValue(float(get("layer_height", 0.2)))
-        self.infill.setValue(int(float(get("infill", 20))))
-        self.perimeters.setValue(int(float(get("perimeters", 2))))
-        self.octoprint_url.setText(str(get("octoprint_url", "")))
-        self.api_key_file.setText(str(get("api_key_file", "")))
-        if str(get("link", "serial")) == "octoprint":
-            self.use_octoprint.setChecked(True)
-
     def _save_settings(self) -> None:
         if self.settings is not None:
-            for k, v in self._values().items():
+            for k, v in settings_values(self).items():
                 self.settings.setValue(f"print/{k}", v)
 
-    def _profile_activated(self, index: int) -> None:
+    def profile_activated(self, index: int) -> None:
         if self.profile.itemText(index) == OTHER_PROFILE:
             path, _ = QFileDialog.getOpenFileName(self, "Printer profile", str(Path.cwd()), "Printer profile (*.json)")
             if path:
@@ -367,10 +220,10 @@ class PrintDialog(QDialog):
             k = self.preview_layer
             self.layer_label.setText(f"layer {k + 1} / {s.layers}, z {s.z[k]:.2f} mm")
 
-    def _preview_toggled(self, on: bool) -> None:
+    def preview_toggled(self, on: bool) -> None:
         self.session.set_preview(on, self.preview_layer)
 
-    def _layer_changed(self, _value: int) -> None:
+    def layer_changed(self, _value: int) -> None:
         self._update_layer_label()
         self.session.preview_layer = self.preview_layer
         if self.preview_check.isChecked():

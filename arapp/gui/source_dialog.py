@@ -38,6 +38,20 @@ def ask_video(parent) -> tuple[str, str | None] | None:
                                            "Calibration (*.yaml *.yml *.json);;All files (*)")
     return video, calib or None
 
+def ask_video_spec(parent, report) -> str | None:
+    """Ask for a video and its calibration: the source spec, or None when cancelled or (told to
+    `report(title, message)`) when no calibration was chosen."""
+    chosen = ask_video(parent)
+    if chosen is None:
+        return None
+    video, calib = chosen
+    if not calib:
+        report("Calibration needed", f"{video}: tracking needs the camera's calibration; "
+               "choose the YAML written by 'arapp calibrate' or OpenCV's calibration tools")
+        return None
+    return sourcespec.video_spec(video, calib)
+
+
 class SourceDialog(QDialog):
     """Emits source_chosen(spec) and closes when the user picks something."""
 

@@ -20,8 +20,9 @@ from PySide6.QtGui import QImage
 
 from arapp.app.live import LiveEngine, SourceInfo, default_pipeline
 from arapp.app.processor import Shown, to_bgra
+from arapp.gui.remote import RemoteEngine
 
-__all__ = ["Engine", "bgr_qimage", "qimage_from_bgra", "SourceInfo", "Shown"]
+__all__ = ["Engine", "make_engine", "bgr_qimage", "qimage_from_bgra", "SourceInfo", "Shown"]
 
 
 def qimage_from_bgra(bgra: np.ndarray) -> QImage:
@@ -99,3 +100,22 @@ class Engine(QObject):
     def send(self, command) -> None:
         """Apply an arapp.app.commands command (the threads pick it up between frames)."""
         self.live.apply(command)
+
+
+def make_engine(kind: str, spec: str, *, name: str, anchors: list, speed: float, loop: bool, handlers,
+                full_frames: bool = False, parent: QObject | None = None):
+    """An engine for `Session` (its `make_engine`): kind "threads" (this process) or "process" (a child
+    process, remote.RemoteEngine), its signals wired to the session's `handlers` (arapp.app.session
+    .EngineHandlers), which Qt then calls on the UI thread."""
+    if kind == "threads":
+        engine = Engine(spec, name=name, anchors=anchors, speed=speed, loop=loop, parent=parent)
+    else:
+        engine = RemoteEngine(spec, name=name, anchors_json=[a.to_dict() for a in anchors], speed=speed,
+                              loop=loop, full_frames=full_frames, parent=parent)
+    engine.opened.connect(handlers.opened)
+    engine.frame_ready.connect(handlers.ready)
+    engine.error.connect(handlers.error)
+    engine.ended.connect(handlers.ended)
+    engine.recorded.connect(handlers.recorded)
+    engine.toolpaths_shown.connect(handlers.toolpaths)
+    return engine

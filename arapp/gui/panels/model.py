@@ -23,11 +23,12 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from arapp.exchange.meshes import file_filter
+from arapp.pipeline import MODES
 from arapp.placement import Placement
 
-MODEL_FILTER = ("Models (*.json *.stl *.obj *.ply *.3mf *.glb);;NURBS models (*.json);;"
-                "Meshes (*.stl *.obj *.ply *.3mf *.glb)")
-MODES = ("shaded", "wireframe", "isolines", "translucent")
+# the mesh suffixes come from the one table of formats (arapp.exchange.meshes.FORMATS)
+MODEL_FILTER = f"Models (*.json {file_filter()});;NURBS models (*.json);;Meshes ({file_filter()})"
 THUMB = 72
 
 

@@ -19,6 +19,8 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from tracking.session import parse_anchors
+
 STATE_STYLE = {"marker": "color: #2a2; font-weight: bold", "slam": "color: #29c; font-weight: bold",
                "lost": "color: #c33; font-weight: bold"}
 
@@ -132,8 +134,6 @@ class AnchorsDialog(QDialog):
         self.anchors_json = anchors_json
 
     def _accept(self) -> None:
-        from tracking.session import parse_anchors
-
         try:
             data = json.loads(self.text.toPlainText())
             parse_anchors(data)
