@@ -71,3 +71,28 @@ def test_required_keys_and_missing_file(tmp_path):
     bad.write_text("{ not json")
     with pytest.raises(ProfileError, match="line 1"):
         load_profile(bad)
+
+
+def test_temperature_limits_come_from_the_profile(tmp_path):
+    from arapp.printing.profile import temperature_limit
+
+    generic = load_profile()
+    assert (temperature_limit(generic, "hotend"), temperature_limit(generic, "bed")) == (300.0, 120.0)
+    path = tmp_path / "hot.json"
+    path.write_text(json.dumps({"format": "arapp-printer/1", "name": "hot", "bed": {"width": 200, "depth": 200,
+                                "height": 200}, "max_hotend_temperature": 285, "max_bed_temperature": 110}))
+    hot = load_profile(path)
+    assert (temperature_limit(hot, "hotend"), temperature_limit(hot, "bed")) == (285.0, 110.0)
+    with pytest.raises(ValueError, match="heater"):
+        temperature_limit(hot, "chamber")
+
+
+@pytest.mark.parametrize("kwargs, flag", [({"baud": 0}, "--baud"), ({"baud": 115200.5}, "--baud"),
+                                          ({"window": 0}, "--window"), ({"window": 64}, "--window"),
+                                          ({"timeout": -1}, "--timeout"), ({"timeout": float("nan")}, "--timeout")])
+def test_link_values_out_of_range_name_the_flag(kwargs, flag):
+    from arapp.printing.profile import check_link_values
+
+    check_link_values(baud=250000, window=4, timeout=10.0)
+    with pytest.raises(ValueError, match=flag):
+        check_link_values(**kwargs)

@@ -216,6 +216,37 @@ def _parse_bed_anchor(block: dict, source: str):
     return anchor, bed_from_anchor
 
 
+LINK_LIMITS = {
+    "baud": (1200, 4_000_000, "baud (the serial rate; Marlin uses 115200 or 250000)"),
+    "window": (1, 8, "lines in flight (Marlin's command buffer holds 4 by default)"),
+    "timeout": (0.5, 600.0, "seconds without an answer"),
+}
+
+
+def check_link_values(baud=None, window=None, timeout=None) -> None:
+    """Raise ValueError naming the flag (--baud, --window, --timeout) when a serial-link value is out of
+    LINK_LIMITS or not a number; None values are not checked (the profile's or the default apply)."""
+    for name, value in (("baud", baud), ("window", window), ("timeout", timeout)):
+        if value is None:
+            continue
+        lo, hi, what = LINK_LIMITS[name]
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+        if name in ("baud", "window"):
+            ok = ok and float(value) == int(value)
+        if not (ok and lo <= value <= hi):
+            raise ValueError(f"--{name} must be {lo:g} to {hi:g} {what}, got {value!r}")
+
+
+def temperature_limit(profile: "PrinterProfile", heater: str) -> float:
+    """The highest target (°C) `profile` allows for `heater` ("hotend" or "bed"); jobs and settings above
+    it are refused (max_hotend_temperature / max_bed_temperature in the profile, else 300 / 120 °C)."""
+    if heater == "hotend":
+        return float(profile.max_hotend_temperature)
+    if heater == "bed":
+        return float(profile.max_bed_temperature)
+    raise ValueError(f"heater must be 'hotend' or 'bed', got {heater!r}")
+
+
 def shipped_profiles() -> list[str]:
     """Names of the profiles shipped with arapp (usable as `--printer NAME`)."""
     return sorted(p.stem for p in PROFILES_DIR.glob("*.json"))
