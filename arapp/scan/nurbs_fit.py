@@ -101,9 +101,55 @@ def fit_revolution(mesh: trimesh.Trimesh, anchors, n_ctrl: int = 8, max_rms_mm: 
     return NurbsFit("revolution", model, rms, mx, axis_world, H, ctrl_r)
 
 
-def fit_model(mesh: trimesh.Trimesh, anchors) -> NurbsFit:
-    """The best editable model arapp can fit: a surface of revolution (the only kind so far)."""
-    return fit_revolution(mesh, anchors)
+def fit_patch(mesh: trimesh.Trimesh, anchors, n_u: int = 12, n_v: int = 8) -> NurbsFit:
+    """A least-squares bicubic B-spline patch wrapped around the scan: u around the vertical axis through
+    the scan's centroid (angle, the seam at u = 0/1 shares its control column), v up the height. Vertices
+    are parameterised by (angle / 2 pi, height / H); the caps are left open (export thickens the wall)."""
+    from arapp.geometry import basis
+    from arapp.scan.fusion import board_frame
+
+    fr = board_frame(anchors)
+    L = fr.to_local(np.asarray(mesh.vertices)) * 1000.0
+    H = float(L[:, 2].max())
+    c = L[:, :2].mean(axis=0)
+    N = np.asarray(mesh.vertex_normals) @ fr.R
+    side = np.abs(N[:, 2]) < 0.7
+    P = L[side] - [c[0], c[1], 0.0]
+    u = (np.arctan2(P[:, 1], P[:, 0]) / (2 * np.pi)) % 1.0
+    v = np.clip(P[:, 2] / H, 0, 1)
+    ku, kv = basis.clamped_uniform_knots(n_u, 3), basis.clamped_uniform_knots(n_v, 3)
+    Bu, Bv = basis.basis_matrix(ku, 3, n_u, u), basis.basis_matrix(kv, 3, n_v, v)
+    A = (Bu[:, :, None] * Bv[:, None, :]).reshape(len(P), n_u * n_v)
+    # the seam: the last control column is the first one (a closed, position-continuous wrap)
+    tie = np.zeros((n_u * n_v, (n_u - 1) * n_v))
+    for i in range(n_u):
+        for j in range(n_v):
+            tie[i * n_v + j, (i % (n_u - 1)) * n_v + j] = 1.0
+    ctrl = np.linalg.lstsq(A @ tie, P, rcond=None)[0]
+    net = (tie @ ctrl).reshape(n_u, n_v, 3) + [c[0], c[1], 0.0]
+    err = np.linalg.norm(A @ (tie @ ctrl) - P, axis=1)
+    rms, mx = float(np.sqrt(np.mean(err ** 2))), float(err.max())
+    model = {
+        "format": "arapp-model", "version": 1, "name": "scan (bicubic patch)", "units": "mm",
+        "description": (f"Fitted by arapp scan --nurbs: a {n_u} x {n_v} bicubic patch wrapped around the scan's "
+                        f"side; fit error rms {rms:.2f} mm, max {mx:.2f} mm. z up from the paper."),
+        "color": [0.75, 0.7, 0.6, 1.0],
+        "placement": {"size_mm": round(float(max(np.ptp(net[..., 0]), np.ptp(net[..., 1]), H)), 3)},
+        "surfaces": [{"type": "nurbs", "name": "side", "control_points": net.tolist(),
+                      "knots_u": ku.tolist(), "knots_v": kv.tolist()}],
+    }
+    axis_world = fr.to_world(np.array([[c[0] / 1000.0, c[1] / 1000.0, 0.0]]))[0]
+    return NurbsFit("bicubic patch", model, rms, mx, axis_world, H, np.zeros(0))
+
+
+def fit_model(mesh: trimesh.Trimesh, anchors, round_tolerance: float = 0.02) -> NurbsFit:
+    """A surface of revolution where the shape allows (fit error RMS within `round_tolerance` of the scan's
+    size), else the bicubic patch, whichever fits better."""
+    rev = fit_revolution(mesh, anchors)
+    if rev.rms_mm <= round_tolerance * max(rev.height_mm, 2 * float(rev.profile_r_mm.max())):
+        return rev
+    patch = fit_patch(mesh, anchors)
+    return patch if patch.rms_mm < rev.rms_mm else rev
 
 
 def write_model(fit: NurbsFit, path: str | Path) -> Path:
