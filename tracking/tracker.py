@@ -1,6 +1,6 @@
 """The combined tracker the pipeline uses: anchors (markers, QR) fused with SLAM-style keypoint tracking.
 
-    tr = Tracker(camera, anchors, slam=True)
+    tr = Tracker(camera, anchors, slam=True)   # settings: TrackerConfig (or its names as keywords)
     res = tr.process(image_bgr, t)      # TrackResult(world_from_camera, state, markers, inliers, ms)
     tr.close()                          # stops the mapping / bundle-adjustment thread
 
@@ -84,51 +84,117 @@ class _Fit:
     out_pose: np.ndarray | None = None
 
 
+@dataclass
+class TrackerConfig:
+    """Every setting of `Tracker`, with its unit. `Tracker(camera, anchors, config=TrackerConfig(...))`, or
+    the same names as keyword arguments (`Tracker(camera, anchors, marker_every=2)`), which override
+    `config`'s fields."""
+
+    slam: bool = True
+    """False: marker-only tracking (the anchors' own filtered pose); no map, no keypoints."""
+    marker_every: int = 4
+    """frames: marker detection period once the map carries the pose."""
+    n_features: int | None = None
+    """ORB keypoints per frame; None scales with the resolution (400..1500)."""
+    ba: bool = True
+    """run local bundle adjustment on new keyframes."""
+    threaded: bool = True
+    """mapping on its own thread; False maps inline (deterministic, for tests)."""
+    max_speed: float = 2.5
+    """m/s: faster-looking camera jumps between frames are rejected as implausible."""
+    max_angular: float = 5.0
+    """rad/s: the same for rotation."""
+    blend_frames: int = 8
+    """frames over which the step at a seam between pose sources (anchors / fused / map) is faded."""
+    min_inliers: int = 20
+    """map points a keypoint-only pose needs."""
+    radius: float = 12.0
+    """pixels: search radius when matching map points by projection."""
+    keyframe_parallax: float = 0.08
+    """fraction of the scene depth the camera moves before a new keyframe."""
+    corner_weight: float = 4.0
+    """weight of an anchor corner against one map point in the joint fit."""
+    corner_share: float = 1 / 3
+    """least share of the joint fit's total weight held by the anchor corners (0.8 while the map is young)."""
+    filter: bool = True
+    """smooth the anchors' own pose (their PoseFilter) on marker-only frames."""
+    max_pending: int = 2
+    """keyframes waiting for the mapping thread beyond which a new keyframe is skipped (tracking never
+    waits for mapping; the next frame asks again)."""
+    max_lag: int = 3
+    """frames: what `catch_up()` (offline drivers only) guarantees: a keyframe's mapping is finished this
+    many frames after it was submitted (one frame while the anchors carry the pose). Live at 30 fps,
+    3 frames = 100 ms covers it without any waiting."""
+    klt: bool = True
+    """between full frames, follow the last inlier keypoints by optical flow instead of detecting and
+    matching ORB features (much cheaper per frame)."""
+    flow: bool = True
+    """when the anchors and the map both fail on a frame after a tracked one, follow keypoints (map
+    points, else points seeded on the anchors' plane) from the last frame by optical flow."""
+    anchor_first: bool = True
+    """while the anchors are in view their tracker's pose is the output (raw for 12+ corners, filtered
+    for a lone marker), and keypoints are extracted only every `keypoint_every`-th frame (and when the
+    anchors are not found); False: the joint marker + keypoint fit on every detection frame."""
+    keypoint_every: int = 10
+    """frames: keypoint work period while the anchors carry the pose."""
+    smear_px: float = 10.0
+    """pixels: under fast motion markers are smeared and their corners can be off by pixels. When the
+    anchors may have moved this far since the last frame, one frame of flow is computed as well; if the
+    flow confirms the motion, the markers' edges across it are soft (`smear_sharpness`) and the flow pose
+    puts the marker corners more than `smear_gate_px` from where they were detected, the flow pose is
+    used, for at most `smear_hold_s` since the anchors were last accepted."""
+    smear_sharpness: float = 0.15
+    """`anchors.edges.edge_sharpness` below which edges count as smeared (about 1/pixels of smear)."""
+    smear_gate_px: float = 1.0
+    """pixels: median gap between flow-projected and detected marker corners that distrusts the markers."""
+    smear_hold_s: float = 0.5
+    """seconds: the longest the flow overrules smeared markers (after that they win again, so flow drift
+    is always bounded by the markers)."""
+    flow_hold_s: float = 2.0
+    """seconds: the longest that flow alone (neither anchors nor map confirming) carries the pose; after
+    that the frame is lost until the anchors or the map take it up again."""
+    cover_fraction: float = 0.2
+    """fraction of a lone marker's side whose white margin looks covered (a hand reaching in,
+    `anchors.occlusion`) from which its measurement is distrusted: the map or flow carry the pose, else
+    the anchors' filter with the measurement weighted `cover_weight`. 0 turns the check off."""
+    cover_weight: float = 0.1
+    """weight (0..1) of a partly covered marker's measurement in the anchors' filter."""
+    new_anchor_gate: float = 0.5
+    """an anchor never seen before in the session is used only if its corners lie within this many of its
+    own image sizes of where the current pose (motion model, map) puts them: a look-alike pattern must
+    not teleport the model. 0 turns the check off."""
+
+
+def _config(config: TrackerConfig | None, overrides: dict) -> TrackerConfig:
+    """`config` (default TrackerConfig()) with keyword overrides; unknown names fail with the list."""
+    import dataclasses
+
+    base = config if config is not None else TrackerConfig()
+    names = {f.name for f in dataclasses.fields(TrackerConfig)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise TypeError(f"Tracker: unknown setting(s) {', '.join(unknown)}; "
+                        f"TrackerConfig has {', '.join(sorted(names))}")
+    return dataclasses.replace(base, **overrides)
+
+
 class Tracker:
-    """Anchors + keypoint SLAM. See the module docstring; parameters:
+    """Anchors + keypoint SLAM. See the module docstring; settings: `TrackerConfig` (as `config`, or
+    its field names as keyword arguments; `slam` may also be given positionally)."""
 
-    slam: False gives marker-only tracking (the anchors' own filtered pose).
-    marker_every: detection period (frames) once the map carries the pose.
-    n_features: ORB keypoints per frame (default scales with resolution).
-    ba: run local bundle adjustment; threaded: mapping on its own thread
-    (False maps inline, deterministic, for tests). max_speed m/s and
-    max_angular rad/s bound plausible motion (faster-looking jumps are rejected).
-    blend_frames: frames over which a seam between sources is faded.
-    max_pending: keyframes waiting for the mapping thread beyond which a new keyframe is skipped
-    (tracking never waits for mapping; the next frame asks again).
-    max_lag: what `catch_up()` (offline drivers only) guarantees: a keyframe's mapping (triangulation
-    + local BA) is finished this many frames after it was submitted, one frame while the anchors
-    carry the pose. Live at 30 fps, 3 frames = 100 ms covers it without any waiting.
-    klt: between full frames (those with marker detection), follow the last inlier keypoints by
-    optical flow instead of detecting and matching ORB features (much cheaper per frame).
-    flow: when the anchors and the map both fail on a frame after a tracked one, follow keypoints
-    (map points, else points seeded on the anchors' plane) from the last frame by optical flow.
-    smear_px, smear_sharpness, smear_gate_px, smear_hold_s: under fast motion markers are smeared and
-    their corners can be off by pixels. When the anchors may have moved `smear_px` pixels or more
-    since the last frame, one frame of flow from the last frame is computed as well; if the flow
-    confirms the image moved that far, the markers' edges across the motion are soft
-    (`anchors.edges.edge_sharpness` below `smear_sharpness`: smeared over more than about
-    1/smear_sharpness pixels) and the flow pose puts the marker corners more than `smear_gate_px`
-    from where they were detected, the flow pose is used, for at most `smear_hold_s` seconds since
-    the anchors were last accepted (after that they win again, so flow drift is always bounded by
-    the markers).
-    flow_hold_s: the longest that flow alone (neither anchors nor map confirming) carries the pose;
-    after that the frame is lost until the anchors or the map take it up again.
-    anchor_first: while the anchors are in view, their tracker's pose (raw for 12+ corners, filtered
-    for a lone marker) is the output, and keypoints are extracted and matched only on every
-    `keypoint_every`-th frame (and when the anchors are not found).
-    False: the joint marker + keypoint fit on every detection frame (the earlier behaviour).
-    """
-
-    def __init__(self, camera: Camera, anchors: list[AnchorSpec], slam: bool = True, *, marker_every: int = 4,
-                 n_features: int | None = None, ba: bool = True, threaded: bool = True, max_speed: float = 2.5,
-                 max_angular: float = 5.0, blend_frames: int = 8, min_inliers: int = 20, radius: float = 12.0,
-                 keyframe_parallax: float = 0.08, corner_weight: float = 4.0, corner_share: float = 1 / 3,
-                 filter: bool = True, max_pending: int = 2, max_lag: int = 3,
-                 klt: bool = True, flow: bool = True, anchor_first: bool = True, keypoint_every: int = 10,
-                 smear_px: float = 10.0, smear_sharpness: float = 0.15, smear_gate_px: float = 1.0,
-                 smear_hold_s: float = 0.5,
-                 flow_hold_s: float = 2.0):
+    def __init__(self, camera: Camera, anchors: list[AnchorSpec], slam: bool | None = None, *,
+                 config: TrackerConfig | None = None, **settings):
+        if slam is not None:
+            settings["slam"] = slam
+        cfg = self.config = _config(config, settings)
+        slam, marker_every, n_features, ba = cfg.slam, cfg.marker_every, cfg.n_features, cfg.ba
+        threaded, max_speed, max_angular = cfg.threaded, cfg.max_speed, cfg.max_angular
+        blend_frames, min_inliers, radius = cfg.blend_frames, cfg.min_inliers, cfg.radius
+        keyframe_parallax, corner_weight, corner_share = cfg.keyframe_parallax, cfg.corner_weight, cfg.corner_share
+        filter, max_pending, max_lag, klt, flow = cfg.filter, cfg.max_pending, cfg.max_lag, cfg.klt, cfg.flow
+        anchor_first, keypoint_every = cfg.anchor_first, cfg.keypoint_every
+        smear_px, smear_sharpness = cfg.smear_px, cfg.smear_sharpness
+        smear_gate_px, smear_hold_s, flow_hold_s = cfg.smear_gate_px, cfg.smear_hold_s, cfg.flow_hold_s
         from tracking.anchors import AnchorTracker  # the anchors package is built alongside
 
         if not anchors:
@@ -155,7 +221,8 @@ class Tracker:
         self._kf_submissions: list[tuple[int, int]] = []   # (frame, mapper request number)
         self.K = camera.K.copy()
         # the anchors' own filter smooths the marker-only frames before the map carries the pose
-        self._anchors = AnchorTracker(anchors, camera, filter=filter)
+        self._anchors = AnchorTracker(anchors, camera, filter=filter, cover_fraction=cfg.cover_fraction,
+                                      cover_weight=cfg.cover_weight, new_anchor_gate=cfg.new_anchor_gate)
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="anchors") if slam else None
         if n_features is None:
             n_features = int(np.clip(camera.width * camera.height / 300, 400, 1500))
@@ -289,7 +356,7 @@ class Tracker:
             # (no detector pass, a few ms) and its pose is the most accurate there is. Keypoint
             # work (ORB, matching, keyframes) runs only every `keypoint_every` frames to grow the map,
             # or when the anchors are not found.
-            ar = self._anchors.process(gray, t)
+            ar = self._anchors.process(gray, t, self._reference(t))
             self._since_detect = 0
             pose = self._anchor_output(ar) if self._anchor_usable(ar) else None
             if (pose is not None and self._frame - self._full_frame < self.keypoint_every
@@ -311,7 +378,7 @@ class Tracker:
             # Flow carried the last frame (motion blur defeats markers and descriptors alike): flow
             # again beside the marker detection, and the full keypoint work only when both fail or
             # every `keypoint_every` frames, to get back onto the map.
-            fut = self._pool.submit(self._anchors.process, gray, t) if detect else None
+            fut = self._pool.submit(self._anchors.process, gray, t, self._reference(t)) if detect else None
             got, flow_tried = self._follow_from_last(gray, t), True
             if fut is not None:
                 ar = fut.result()
@@ -323,7 +390,7 @@ class Tracker:
             if got is not None and (not usable or self._smeared(ar, got, gray, t)):
                 return self._flow_result(got, t, t0, int(ar.markers) if ar is not None else 0)
         self._full_frame = self._frame
-        fut = self._pool.submit(self._anchors.process, gray, t) if detect else None
+        fut = self._pool.submit(self._anchors.process, gray, t, self._reference(t)) if detect else None
         # while the map is young, features are only needed on frames that may become keyframes
         # (and always when the anchors were just lost: the map has to take over on this very frame)
         need_feats = (not (young and (detect or ar is not None)) or self._frame - self._kf_frame >= 5
@@ -350,7 +417,14 @@ class Tracker:
         if fit is None:
             if not flow_tried:
                 got = self._follow_from_last(gray, t)
-            return self._flow_result(got, t, t0, markers) if got is not None else self._lost_frame(t0, markers)
+            if got is not None:
+                return self._flow_result(got, t, t0, markers)
+            if ar is not None and ar.covered and ar.world_from_camera is not None:
+                # nothing else holds the pose: the partly covered anchors, as their filter weighed them
+                cw, cuv, n = self._anchor_points(ar, covered_too=True)
+                pose = np.asarray(ar.world_from_camera, float)
+                return self._finish(pose, pred, "marker", "anchors", None, n, len(cw), t, t0)
+            return self._lost_frame(t0, markers)
 
         self.map.count_matches(fit.visible, fit.point_ids)
         self._maybe_keyframe(t, fit.pose, feats, fit.point_ids, fit.feature_idx, corners_w, corners_uv, fit.state,
@@ -365,10 +439,12 @@ class Tracker:
         self._full_tracks = int(min(n, MAX_TRACKS))
         return self._finish(fit.pose, pred, fit.state, fit.source, fit.out_pose, markers, fit.inliers, t, t0)
 
-    def _anchor_points(self, ar) -> tuple[np.ndarray, np.ndarray, int]:
+    def _anchor_points(self, ar, covered_too: bool = False) -> tuple[np.ndarray, np.ndarray, int]:
         """The anchors' measured corners this frame: world points (N,3), undistorted pixels (N,2) and the
-        marker count; empty when the anchors gave no pose."""
-        if ar is None or ar.raw_world_from_camera is None or len(ar.object_points) < 4:
+        marker count; empty when the anchors gave no pose or (unless `covered_too`) rest on partly
+        covered markers (their corners may be off by pixels: the map and flow carry the pose then)."""
+        if (ar is None or ar.raw_world_from_camera is None or len(ar.object_points) < 4
+                or (ar.covered and not covered_too)):
             return np.zeros((0, 3)), np.zeros((0, 2)), 0
         corners_uv = self.camera.undistort_points(np.asarray(ar.image_points, float).reshape(-1, 2))
         return np.asarray(ar.object_points, float).reshape(-1, 3), corners_uv, int(ar.markers)
@@ -516,11 +592,17 @@ class Tracker:
         self._via_flow, self._flow_start = True, start
         return res
 
+    def _reference(self, t: float) -> np.ndarray | None:
+        """This frame's pose as the motion model (anchors, map or flow) predicts it, for the anchor tracker
+        to screen anchors it has never seen (None while lost: then nothing holds the pose)."""
+        return self.motion.predict(t) if self._lost == 0 and self.motion.last is not None else None
+
     @staticmethod
     def _anchor_usable(ar) -> bool:
-        """The anchors' own pose can be shown as it is: measured this frame on enough corners."""
+        """The anchors' own pose can be shown as it is: measured this frame on enough corners, none of
+        them on a partly covered marker."""
         return (ar is not None and ar.world_from_camera is not None and ar.raw_world_from_camera is not None
-                and len(ar.object_points) >= 4)
+                and len(ar.object_points) >= 4 and not ar.covered)
 
     @staticmethod
     def _anchor_output(ar) -> np.ndarray:

@@ -12,6 +12,7 @@ from tracking.anchors.detect import ArucoDetection, Observation, detector_parame
 from tracking.anchors.edges import edge_sharpness
 from tracking.anchors.filter import PoseFilter
 from tracking.anchors.model import AnchorModel, build_models, square_corners
+from tracking.anchors.occlusion import covered_fraction, is_covered
 from tracking.anchors.pose import planar_solutions, project, residuals, solve_pose
 from tracking.anchors.qr import QRTracking
 from tracking.camera import Camera
@@ -29,6 +30,11 @@ class AnchorResult:
     reprojection_error: RMS pixels of the final solution (nan if none).
     object_points (N,3) world metres / image_points (N,2) distorted pixels: the inlier correspondences.
     anchors_seen: indices into the anchors list; ms: processing time of this frame.
+    covered: the pose rests on markers whose white margin is partly covered (a hand reaching in): its
+    corners may be off by pixels, the filter gave it little weight, and a caller with another source
+    of pose (map, optical flow) should prefer that one.
+    rejected: anchors (indices) detected this frame but left out as inconsistent: never seen before
+    in this session and far from where the reference pose puts them (a look-alike pattern).
     """
 
     world_from_camera: np.ndarray | None = None
@@ -40,6 +46,8 @@ class AnchorResult:
     image_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     anchors_seen: list[int] = field(default_factory=list)
     ms: float = 0.0
+    covered: bool = False
+    rejected: list[int] = field(default_factory=list)
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -65,11 +73,20 @@ class AnchorTracker:
     smear_sharpness: a measurement whose markers moved `smear_px` pixels or more since the last frame
     and whose edges are smeared along that motion (`edges.edge_sharpness` below `smear_sharpness`)
     counts less in the filter (motion blur biases corners by pixels).
+    cover_fraction / cover_weight: an ArUco marker with a side whose white margin is at least
+    `cover_fraction` covered (`occlusion.covered_fraction`) is left out when other markers carry the
+    pose, else its measurement counts `cover_weight` in the filter and the result says `covered`.
+    new_anchor_gate: a frame's anchor never seen before in this session, detected while a reference
+    pose exists (the caller's, else the filter's prediction, else the first declared anchor in view),
+    is used only if its corners lie within `new_anchor_gate` times its own image size (pixels, the
+    geometric mean of its bounding box's sides; at least 20 px) of where the reference puts them; it
+    becomes trusted once used. 0 turns the check off.
     """
 
     def __init__(self, anchors: list[AnchorSpec], camera: Camera, filter: bool = True, *, roi: bool = True,
                  full_every: int = 10, track_markers: bool = True, outlier_px: float = 3.0, branch_decay: float = 0.8,
                  branch_switch: float = 6.0, smear_px: float = 10.0, smear_sharpness: float = 0.15,
+                 cover_fraction: float = 0.2, cover_weight: float = 0.1, new_anchor_gate: float = 0.5,
                  **filter_params):
         if not anchors:
             raise ValueError("AnchorTracker needs at least one anchor (the session's anchors list is empty)")
@@ -82,6 +99,9 @@ class AnchorTracker:
         self.filter_enabled = bool(filter)
         self.filter = PoseFilter(**filter_params)
         self.smear_px, self.smear_sharpness = float(smear_px), float(smear_sharpness)
+        self.cover_fraction, self.cover_weight = float(cover_fraction), float(cover_weight)
+        self.new_anchor_gate = float(new_anchor_gate)
+        self.cover_max_markers = 2
         self.roi = roi
         self.full_every = max(int(full_every), 1)
         self.track_markers = bool(track_markers)
@@ -101,6 +121,7 @@ class AnchorTracker:
         self.branch_evidence = 0.0
         self._alternative = None
         self.tracked_keys: set[tuple[int, int]] = set()
+        self.trusted: set[int] = set()   # anchors that have carried (or agreed with) the pose this session
 
     def _other_branch_wins(self, obs: list[Observation], sol) -> bool:
         """Accumulate evidence between the two IPPE branches when a single planar anchor carries the pose.
@@ -147,8 +168,11 @@ class AnchorTracker:
         return float(max(0.2, sharp / self.smear_sharpness) ** 2)
 
     # ------------------------------------------------------------------------------------------------
-    def process(self, image: np.ndarray, t: float) -> AnchorResult:
-        """Detect the anchors in `image` (BGR or gray uint8, distorted as `camera` says) taken at time t (s)."""
+    def process(self, image: np.ndarray, t: float, reference: np.ndarray | None = None) -> AnchorResult:
+        """Detect the anchors in `image` (BGR or gray uint8, distorted as `camera` says) taken at time t (s).
+
+        `reference`: the caller's own estimate of this frame's world_from_camera (a map, a motion model),
+        used to screen anchors never seen before; without it the filter's prediction is used."""
         t0 = time.perf_counter()
         gray = to_gray(image)
         if gray.shape != (self.camera.height, self.camera.width):
@@ -159,13 +183,17 @@ class AnchorTracker:
         self._tracked_only = False
         aruco_obs = self._detect_aruco(gray, pred_cfw)
         qr_obs = self.qr.process(gray, pred_cfw, self._expected_qr(pred_cfw)) if self.qr.models else []
-        obs = aruco_obs + qr_obs
+        ref_cfw = invert(reference) if reference is not None else pred_cfw
+        obs, rejected = self._screen_new(aruco_obs + qr_obs, ref_cfw)
+        fast = self._moving_fast(pred_cfw)
+        obs, covered = self._drop_covered(gray, obs, fast)
         sol = solve_pose(obs, self.world_from_anchor, self.camera, pred_cfw, outlier_px=self.outlier_px)
         if self._tracked_only and (sol is None or sol.rms > self.track_max_rms
                                    or len(sol.world) < 0.8 * sum(len(o.obj) for o in obs)):
             # markers re-found by tracking did not agree well: detect them properly this frame
             self.tracked_keys = set()
-            obs = self._detect_aruco(gray, pred_cfw) + qr_obs
+            obs, rejected = self._screen_new(self._detect_aruco(gray, pred_cfw) + qr_obs, ref_cfw)
+            obs, covered = self._drop_covered(gray, obs, fast)
             sol = solve_pose(obs, self.world_from_anchor, self.camera, pred_cfw, outlier_px=self.outlier_px)
         if sol is not None and pred_cfw is not None and self._other_branch_wins(obs, sol):
             # the image has favoured the other IPPE branch for a while: the branch kept so far was the wrong
@@ -186,7 +214,11 @@ class AnchorTracker:
             px_sigma = max(sol.rms * np.sqrt(2 * n / max(2 * n - 6, 1)), 0.1)
             lever = np.sqrt(1.0 + (self.camera.fx / extent) ** 2)
             sigma = 2.0 * px_sigma / extent * lever / np.sqrt(max(n / 4.0, 1.0))
-            filt = self.filter.update(raw, t, depth, sigma, weight=self._smear_weight(gray, sol, raw))
+            covered = covered and bool(covered & set(sol.anchors))
+            weight = self._smear_weight(gray, sol, raw) * (self.cover_weight if covered else 1.0)
+            filt = self.filter.update(raw, t, depth, sigma, weight=weight)
+            self.trusted.update(sol.anchors)
+            res.covered = bool(covered)
             res.raw_world_from_camera = raw
             res.world_from_camera = filt if self.filter_enabled else raw
             res.markers = sol.markers
@@ -200,8 +232,92 @@ class AnchorTracker:
                                  and self.models[ob.anchor].kind in ("aruco", "aruco_board") for g in np.unique(ob.groups)}
         else:
             self.tracked_keys = set()
+        res.rejected = rejected
         res.ms = (time.perf_counter() - t0) * 1000.0
         return res
+
+    def _screen_new(self, obs: list[Observation], ref_cfw: np.ndarray | None) -> tuple[list[Observation], list[int]]:
+        """Leave out observations of anchors never trusted in this session whose corners are far from
+        where the reference pose (camera_from_world) puts them: a new anchor that disagrees with the
+        pose everything else holds is more likely a look-alike (a pattern on packaging decoding as the
+        anchor's id) than a teleport. Without a reference (nothing holds the pose) all are kept.
+        Returns (kept observations, rejected anchor indices)."""
+        if self.new_anchor_gate <= 0 or all(ob.anchor in self.trusted for ob in obs):
+            return obs, []
+        if ref_cfw is None:
+            if len({ob.anchor for ob in obs}) < 2:
+                return obs, []
+            # nothing holds the pose yet and several new anchors disagree or not: the one declared first
+            # (the world anchor, if seen) is taken as the reference for the others
+            first = min(obs, key=lambda ob: (ob.anchor, -len(ob.obj)))
+            sols = planar_solutions(first, self.camera)
+            if not sols:
+                return obs, []
+            ref_cfw = sols[0] @ invert(self.world_from_anchor[first.anchor])
+        kept, rejected = [], []
+        for ob in obs:
+            if ob.anchor in self.trusted:
+                kept.append(ob)
+                continue
+            world = transform_points(self.world_from_anchor[ob.anchor], ob.obj)
+            px, z = project(self.camera, ref_cfw, world)
+            size = float(np.sqrt(np.prod(np.ptp(ob.img, axis=0))))   # the anchor's own image size, pixels
+            gap = float(np.median(np.linalg.norm(px - ob.img, axis=1))) if np.all(z > 0) else np.inf
+            if gap <= self.new_anchor_gate * max(size, 20.0):
+                kept.append(ob)
+            else:
+                rejected.append(ob.anchor)
+        return kept, sorted(set(rejected))
+
+    def _moving_fast(self, pred_cfw: np.ndarray | None) -> bool:
+        """Whether the filter expects the anchors to move `smear_px` pixels or more since the last frame
+        (then motion blur, not a hand, is what lowers a margin's contrast: the smear weighting handles it)."""
+        if pred_cfw is None or not self.filter.initialised:
+            return False
+        pts = np.concatenate([m.to_world(m.outline()) for m in self.models])
+        now, _ = project(self.camera, pred_cfw, pts)
+        last, _ = project(self.camera, invert(self.filter.pose()), pts)
+        return bool(np.median(np.linalg.norm(now - last, axis=1)) >= self.smear_px)
+
+    def _drop_covered(self, gray: np.ndarray, obs: list[Observation], fast: bool = False
+                      ) -> tuple[list[Observation], set[int]]:
+        """Screen ArUco markers for a partly covered white margin (occlusion.covered_fraction). Covered
+        markers are dropped while uncovered markers remain in the frame; otherwise all are kept and
+        the anchors with covered markers are returned (their measurement is then down-weighted).
+        Not while the camera moves fast (`fast`: blur lowers margins alike and is weighed separately),
+        nor when more than `cover_max_markers` markers are in view (many markers outvote one marker's bad
+        corners in the fit, and dropping markers would only cost precision)."""
+        if self.cover_fraction <= 0 or fast or sum(ob.markers for ob in obs) > self.cover_max_markers:
+            return obs, set()
+        flagged: dict[int, np.ndarray] = {}
+        good = 0
+        for k, ob in enumerate(obs):
+            m = self.models[ob.anchor]
+            # lone markers only: a board's corners come from a marker family drawn on one sheet (thin
+            # margins between them, and its other markers outvote a covered one in the fit)
+            if m.kind != "aruco" or len(ob.img) != 4:
+                good += len(ob.img) // 4
+                continue
+            bits = self.aruco.bits[m.spec.dictionary_id]
+            bad = np.array([is_covered(covered_fraction(gray, q, bits), self.cover_fraction)
+                            for q in ob.img.reshape(-1, 4, 2)])
+            good += int((~bad).sum())
+            if bad.any():
+                flagged[k] = bad
+        if not flagged:
+            return obs, set()
+        if good == 0:
+            return obs, {obs[k].anchor for k in flagged}
+        out = []
+        for k, ob in enumerate(obs):
+            bad = flagged.get(k)
+            if bad is None:
+                out.append(ob)
+            elif not bad.all():
+                keep = np.repeat(~bad, 4)
+                out.append(Observation(ob.anchor, ob.obj[keep], ob.img[keep], ob.groups[keep], int((~bad).sum()),
+                                       square=ob.square))
+        return out, set()
 
     def _detect_aruco(self, gray: np.ndarray, pred_cfw: np.ndarray | None) -> list[Observation]:
         if not self.aruco.models:
