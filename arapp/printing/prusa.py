@@ -194,6 +194,7 @@ def slice_with_prusa(mesh_mm, settings=None, profile=None, progress=None, cancel
 
     settings = settings or SliceSettings()
     profile = profile or load_profile()
+    settings.check_for(profile)  # the same ranges as the built-in slicer
     require_prusa()
     if progress:
         progress(0.0)

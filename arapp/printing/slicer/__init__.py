@@ -72,8 +72,8 @@ def slice_mesh(mesh_mm, settings: SliceSettings | None = None, profile=None, pro
     from .planner import plan_layer, skirt_loops
 
     settings = settings or SliceSettings()
-    settings.check()
     profile = profile or load_profile()
+    settings.check_for(profile)  # ranges tied to this printer's nozzle, height and heaters
 
     def report(f):
         if cancel is not None and cancel.is_set():
