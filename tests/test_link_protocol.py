@@ -48,3 +48,33 @@ def test_program_layers_and_cancel_heats_nothing():
     state = JobState(z=205.0, hotend_target=210, bed_target=60)
     cmds = cancel_commands(state, bed_height=210.0)
     assert not any(is_heating(c) for c in cmds) and "G1 Z5 F600" in cmds and cmds[-1] == "M84"
+
+
+def test_reply_texts():
+    """What each kind of reply keeps as its text (the halt message shown to the user, echo lines...)."""
+    cases = [
+        ("ok T:210.0 /210.0", P.OK, "ok T:210.0 /210.0"),
+        ("Resend: 42", P.RESEND, "Resend: 42"),
+        ("Error:Thermal Runaway, system stopped!", P.FATAL, "Thermal Runaway, system stopped!"),
+        ("error checksum mismatch", P.ERROR, "checksum mismatch"),
+        ("Error MINTEMP triggered", P.FATAL, "MINTEMP triggered"),
+        ("!! Lost communication", P.FATAL, "Lost communication"),
+        ("!!", P.FATAL, "!!"),
+        ("fatal: board gone", P.FATAL, "board gone"),
+        ("start", P.START, "start"),
+        ("wait", P.WAIT, "wait"),
+        ("busy: processing", P.BUSY, "busy: processing"),
+        ("//action:pause now", P.ACTION, "pause now"),
+        ("// just a comment", P.OTHER, "// just a comment"),
+        ("echo:Unknown command", P.ECHO, "Unknown command"),
+        ("X:1.00 Y:2.00 T:20", P.OTHER, "X:1.00 Y:2.00 T:20"),  # a position report, not temperatures
+        ("Marlin 2.1", P.OTHER, "Marlin 2.1"),
+    ]
+    for raw, kind, text in cases:
+        reply = P.parse_reply(raw)
+        assert (reply.kind, reply.text) == (kind, text), raw
+
+
+def test_frame_replaces_what_ascii_cannot_carry():
+    assert P.frame(1, "M117 Grüße") == b"N1 M117 Gr??e*" + str(P.checksum("N1 M117 Gr??e")).encode() + b"\n"
+    assert P.checksum("ü") == ord("?")

@@ -20,9 +20,6 @@ from arapp.printing.link.stream import (
     code_of,
 )
 
-HELLO = b"N0 M110 N0*125\n"
-
-
 def framed(n: int, cmd: str) -> bytes:
     body = f"N{n} {cmd}"
     cs = 0
@@ -38,7 +35,7 @@ def program_items(texts, start_index=0):
 
 def stream(**kw) -> LineStream:
     s = LineStream(**kw)
-    s.reset_numbering(HELLO, now=0.0)
+    s.reset_numbering(now=0.0)
     return s
 
 
@@ -150,7 +147,7 @@ def test_only_answers_reset_the_timer_for_a_plain_line():
     for t in (0.5, 1.0, 1.5, 1.9):
         s.on_keepalive(temp, t)
         s.on_keepalive(busy, t)
-    assert s.deadline(1.9) == pytest.approx(2.0)
+    assert s.deadline() == pytest.approx(2.0)
     assert s.on_timeout(1.9) is Step.WAITING
     assert s.on_timeout(2.0) is Step.REWOUND and s.timeouts == 1
 
@@ -159,12 +156,12 @@ def test_busy_keeps_a_blocking_command_alive():
     s = stream(timeout=2.0, blocking_timeout=100.0)
     s.start(program_items(["G29"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
-    assert s.deadline(0.0) == pytest.approx(100.0)  # silent so far: a silent firmware gets minutes
+    assert s.deadline() == pytest.approx(100.0)  # silent so far: a silent firmware gets minutes
     busy = P.parse_reply("echo:busy: processing")
     for t in range(1, 300):
         s.on_keepalive(busy, float(t))
         assert s.on_timeout(float(t) + 0.5) is Step.WAITING
-    assert s.deadline(299.0) == pytest.approx(301.0)  # alive printer: timeout after the last keep-alive
+    assert s.deadline() == pytest.approx(301.0)  # alive printer: timeout after the last keep-alive
     assert s.on_timeout(301.0) is Step.REWOUND
 
 
@@ -173,11 +170,11 @@ def test_heat_wait_temperatures_extend_only_until_the_target():
     s.start(program_items(["M109 S210"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
     s.on_keepalive(P.parse_reply("T:150.0 /210.0 B:25.0 /0.0 @:0 B@:0"), 5.0)
-    assert s.deadline(5.0) == pytest.approx(7.0)
+    assert s.deadline() == pytest.approx(7.0)
     s.on_keepalive(P.parse_reply("T:209.0 /210.0 B:25.0 /0.0 W:5"), 6.0)  # Marlin's countdown: still waiting
-    assert s.deadline(6.0) == pytest.approx(8.0)
+    assert s.deadline() == pytest.approx(8.0)
     s.on_keepalive(P.parse_reply("T:210.0 /210.0 B:25.0 /0.0 @:0 B@:0"), 7.0)  # auto-report at target
-    assert s.deadline(7.0) == pytest.approx(8.0)
+    assert s.deadline() == pytest.approx(8.0)
 
 
 def test_temperatures_do_not_extend_a_non_heating_blocking_command():
@@ -185,7 +182,7 @@ def test_temperatures_do_not_extend_a_non_heating_blocking_command():
     s.start(program_items(["G28"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
     s.on_keepalive(P.parse_reply("T:150.0 /210.0 B:25.0 /0.0"), 50.0)
-    assert s.deadline(50.0) == pytest.approx(100.0)
+    assert s.deadline() == pytest.approx(100.0)
 
 
 def test_too_many_timeouts_stop():
@@ -216,7 +213,7 @@ def test_recoverable_error_shortens_the_wait_for_its_resend():
     s.start(program_items(["G1 X1"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
     s.on_error(3.0)
-    assert s.deadline(3.0) == pytest.approx(4.0)
+    assert s.deadline() == pytest.approx(4.0)
 
 
 def test_wait_with_an_old_unanswered_line_rewinds():
@@ -304,3 +301,282 @@ def test_code_of_and_blocking_set():
     assert code_of("g01 x1") == "G1" and code_of("M109 S210") == "M109" and code_of("") == ""
     assert {"M109", "M190", "G28", "G29", "M0", "M1", "M600", "M400"} <= BLOCKING
     assert "G1" not in BLOCKING
+
+
+# -- rules pinned by mutation testing (docs/mutation-testing.md) ------------------------------------
+def test_nothing_left_to_send_is_an_empty_list():
+    s = stream()
+    s.start([], JobState(), now=0.0)
+    assert s.frames_to_send(0.0) == [] and s.finished()
+
+
+def test_finished_needs_every_condition():
+    s = stream(window=2, rx_buffer=1000)
+    s.start(program_items(["G1 X1", "G1 X2"]), JobState(), now=0.0)
+    assert not s.finished()  # items left
+    s.frames_to_send(0.0)
+    assert not s.finished()  # in flight
+    s.on_ok(0.1)
+    s.on_ok(0.2)
+    assert s.finished()
+    s.on_timeout(100.0)  # nothing in flight: no timer
+    s.next_number = s.top  # a rewound top line not sent yet
+    assert not s.finished()
+
+
+def test_paused_stream_still_resends_up_to_the_top_line():
+    s = stream(window=2, rx_buffer=1000)
+    s.start(program_items(["G1 X1", "G1 X2", "G1 X3"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    s.paused = True
+    assert s.on_timeout(10.0) is Step.REWOUND
+    assert s.frames_to_send(10.0) == [framed(1, "G1 X1"), framed(2, "G1 X2")]
+    assert s.frames_to_send(10.0) == []
+
+
+def test_timer_starts_when_a_line_goes_out_after_an_idle_time():
+    s = stream(timeout=2.0)
+    s.start(program_items(["G1 X1"]), JobState(), now=0.0)
+    s.paused = True
+    s.frames_to_send(0.0)
+    s.paused = False
+    s.frames_to_send(50.0)
+    assert s.deadline() == pytest.approx(52.0)
+
+
+def test_history_keeps_the_last_lines_only():
+    s = stream(window=1, history_len=2)
+    s.start(program_items([f"G1 X{i}" for i in range(1, 6)]), JobState(), now=0.0)
+    for t in range(5):
+        s.frames_to_send(float(t))
+        s.on_ok(float(t) + 0.5)
+    assert sorted(s.history) == [4, 5]
+
+
+def test_resend_bookkeeping():
+    s = stream(window=2, rx_buffer=1000, timeout=5.0)
+    s.start(program_items(["G1 X1", "G1 X2", "G1 X3"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)  # 1, 2
+    s.on_error(1.0)
+    assert s.deadline() == pytest.approx(2.0)
+    assert s.on_resend(2, 1.5) is Step.REWOUND  # confirms 1
+    assert s.confirmed == 1 and s.resends == 1 and s.epoch == 1
+    assert s.deadline() == pytest.approx(6.5)  # the answer reset the timer and the error wait
+    assert s.on_resend(5, 1.6).reason is StopReason.BAD_RESEND  # top + 2: never sent
+    assert s.on_resend(4, 1.6) is not None and s.resends == 3
+
+
+def test_resend_with_nothing_in_flight():
+    s = stream(window=1)
+    s.start(program_items(["G1 X1"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    s.on_ok(0.1)
+    assert s.on_resend(2, 0.2) is Step.REWOUND and s.next_number == 2
+
+
+def test_two_rewinds_make_both_older_epochs_stale():
+    s = stream(window=3, rx_buffer=1000)
+    s.start(program_items(["G1 X1", "G1 X2", "G1 X3"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)  # 1, 2, 3 (epoch 0)
+    s.on_timeout(20.0)  # epoch 1: nothing in flight
+    s.frames_to_send(20.0)  # 1, 2, 3 again (epoch 1)
+    assert s.on_resend(1, 20.1) is Step.REWOUND  # epoch 2
+    assert s.epoch == 2
+    s.on_ok(20.1)
+    assert [c.epoch for c in s.inflight] == [1, 1]
+    assert s.on_resend(1, 20.2) is Step.IGNORED  # a stale copy's request
+
+
+def test_a_stale_copy_asked_for_twice_absorbs_the_second_ok():
+    s = stream(window=2, rx_buffer=1000)
+    s.start(program_items(["G1 X1", "G1 X2", "G1 X3"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)  # 1, 2
+    assert s.on_resend(1, 0.1) is Step.REWOUND
+    assert s.on_ok(0.1) is Step.IGNORED
+    assert s.on_resend(1, 0.2) is Step.IGNORED  # stale copy 2's request
+    assert s.on_resend(1, 0.2) is Step.IGNORED  # ... doubled
+    assert s.absorb_oks == 1
+    assert s.on_ok(0.2) is Step.IGNORED and s.on_ok(0.2) is Step.IGNORED
+    assert s.absorb_oks == 0 and s.confirmed == 0
+
+
+def test_a_new_request_after_progress_is_not_a_double():
+    s = stream(window=1)
+    s.start(program_items(["G1 X1", "G1 X2"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    assert s.on_resend(1, 0.1) is Step.REWOUND
+    s.on_ok(0.1)
+    s.frames_to_send(0.1)
+    s.on_ok(0.2)  # line 1 ran
+    s.frames_to_send(0.2)
+    assert s.on_resend(2, 0.3) is Step.REWOUND  # a different request: honoured
+
+
+def test_error_without_a_line_in_flight_sets_no_timer():
+    s = stream(timeout=5.0)
+    s.start(program_items(["G1 X1"]), JobState(), now=0.0)
+    s.on_error(1.0)
+    s.frames_to_send(10.0)
+    assert s.deadline() == pytest.approx(15.0)
+
+
+def test_wait_counts_as_a_timeout_only_for_an_old_line():
+    s = stream(timeout=10.0)
+    s.start(program_items(["G1 X1"]), JobState(), now=0.0)
+    s.frames_to_send(10.0)
+    assert s.on_wait(10.1) is Step.NOTHING and s.timeouts == 0
+    assert s.on_wait(10.5) is Step.REWOUND and s.timeouts == 1
+    s.frames_to_send(10.5)
+    assert s.on_wait(11.0) is Step.REWOUND and s.timeouts == 2
+
+
+def test_keepalive_resets_the_timeout_count_and_marks_the_printer():
+    s = stream(timeout=1.0, max_timeouts=1, blocking_timeout=100.0)
+    s.start(program_items(["G28", "G29"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    assert s.on_timeout(100.0) is Step.REWOUND and s.consecutive_timeouts == 1
+    s.frames_to_send(100.0)
+    s.on_keepalive(P.parse_reply("busy: processing"), 100.5)
+    assert s.consecutive_timeouts == 0 and s.keepalive_seen
+    s.on_ok(101.0)
+    s.frames_to_send(101.0)  # G29: the printer sends keep-alives, silence is a lost answer after the timeout
+    assert s.deadline() == pytest.approx(102.0)
+
+
+def test_heat_wait_keepalive_resets_the_timeout_count():
+    s = stream(timeout=1.0, blocking_timeout=100.0)
+    s.start(program_items(["M190 S60"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    s.on_timeout(100.0)
+    s.frames_to_send(100.0)
+    s.on_keepalive(P.parse_reply("T:25.0 /0.0 B:40.0 /60.0"), 100.5)
+    assert s.consecutive_timeouts == 0 and s.deadline() == pytest.approx(101.5)
+
+
+@pytest.mark.parametrize("command, reply, alive", [
+    ("M109", "T:150.0 /0.0", False),  # no target to compare with
+    ("M190 S60", "T:25.0 /0.0", False),  # no bed reading
+    ("M190 S60", "B:57.0 /60.0", False),  # within 3 C
+    ("M190 S60", "B:56.9 /60.0", True),
+    ("M109 S210", "T0:100.0 /210.0", True),
+])
+def test_heat_wait_reading(command, reply, alive):
+    s = stream(timeout=1.0, blocking_timeout=100.0)
+    s.start(program_items([command]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    s.on_keepalive(P.parse_reply(reply), 50.0)
+    assert s.deadline() == pytest.approx(51.0 if alive else 100.0)
+
+
+def test_timeout_counters_and_message():
+    s = stream(timeout=1.5, max_timeouts=2)
+    s.start(program_items(["G1 X1"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    s.on_error(0.5)
+    assert s.on_timeout(1.5) is Step.REWOUND  # the error's 1 s wait
+    assert s.error_seen_at is None and s.deadline() is None
+    s.frames_to_send(1.5)
+    assert s.deadline() == pytest.approx(3.0)
+    s.on_timeout(3.0)
+    s.frames_to_send(3.0)
+    out = s.on_timeout(4.5)
+    assert s.timeouts == 3 and out.message == "the printer stopped answering (no reply for 1.5 s, 2 times)"
+
+
+def test_action_and_start_messages():
+    s = stream()
+    assert s.on_action("") is Step.NOTHING
+    assert s.on_action("disconnect").message == "the printer asked the host to disconnect"
+    assert s.on_start().message == "the printer restarted (firmware reset) during the print"
+
+
+def test_cancel_while_paused_sends_the_cancel_sequence():
+    state = JobState(z=205.0)
+    s = stream(window=1)
+    s.start(program_items(["G1 X1"]), state, now=0.0)
+    s.paused = True
+    assert s.progress_kind() == "paused"
+    s.cancel(bed_height=210.0, emergency_parser=True, now=0.0)  # nothing in flight: no M108
+    assert not s.paused
+    assert s.frames_to_send(0.0) == [framed(1, "M104 S0")]
+    assert [i.text for i in s.items][3] == "G1 Z5 F600"  # lift capped by the bed's height
+    assert s.cancel(bed_height=210.0, emergency_parser=True, now=0.0) == []  # once
+
+
+def test_no_m108_unless_a_heat_wait_with_an_emergency_parser():
+    s = stream(window=1)
+    s.start(program_items(["G28", "G1 X1"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    assert s.progress_kind() == "printing"
+    assert s.cancel(bed_height=None, emergency_parser=True, now=0.1) == []
+    s2 = stream(window=1)
+    s2.start(program_items(["M109 S200"]), JobState(), now=0.0)
+    s2.frames_to_send(0.0)
+    assert s2.cancel(bed_height=None, emergency_parser=False, now=0.1) == []
+
+
+def test_m108_while_resending_goes_out_in_order():
+    s = stream(window=2, rx_buffer=1000)
+    s.start(program_items(["M190 S60", "G1 X1"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)  # 1, 2
+    s.on_timeout(1000.0)  # rewind to 1
+    s.window = 1
+    assert s.frames_to_send(1000.0) == [framed(1, "M190 S60")]  # line 2 is still to be resent
+    assert s.cancel(bed_height=None, emergency_parser=True, now=1000.1) == []
+    assert s.items[0].text == "M108" and s.top == 2
+
+
+def test_m108_is_kept_for_a_resend():
+    s = stream(window=1)
+    s.start(program_items(["M109 S200", "G1 X1"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    assert s.cancel(bed_height=None, emergency_parser=True, now=0.1) == [framed(2, "M108")]
+    assert s.top == 2 and len(s.inflight) == 2 and s.inflight[1].sent_at == 0.1
+    s.on_timeout(100.0 + 600.0)
+    assert s.frames_to_send(700.0) == [framed(1, "M109 S200")]
+    s.on_ok(700.1)
+    assert s.frames_to_send(700.1) == [framed(2, "M108")]
+
+
+def test_finish_keeps_the_stop_and_clears_old_messages():
+    state = JobState(message="old")
+    s = stream()
+    s.start([], state, now=0.0)
+    stop = Stop(StopReason.HALTED, "Thermal Runaway")
+    assert s.finish(stop).stop is stop
+    s.cancelling = True
+    f = s.finish(None)
+    assert (f.status, f.message, f.stop, state.message) == ("cancelled", "cancelled", None, "")
+    s.cancelling = False
+    f = s.finish(None)
+    assert (f.status, f.message, state.message) == ("done", "", "")
+
+
+def test_poll_frames_while_paused_and_their_resend():
+    s = stream(window=1, poll_interval=1.0)
+    s.start(program_items(["G1 X1"]), JobState(), now=0.0)
+    s.paused = True
+    assert s.poll_frame(1.5) == framed(1, "M105")
+    s.on_ok(1.6)
+    assert s.poll_frame(2.0) is None  # 0.5 s after the last poll
+    assert s.poll_frame(2.5) == framed(2, "M105")
+    assert s.top == 2 and s.history[2][1].text == "M105"
+    s.on_timeout(20.0)
+    assert s.frames_to_send(20.0) == [framed(2, "M105")]  # resent while paused
+    s2 = stream(window=1, poll_interval=0.0)
+    s2.start([], JobState(), now=0.0)
+    s2.paused = True
+    assert s2.poll_frame(100.0) is None
+
+
+def test_ok_for_an_already_confirmed_copy_is_ignored():
+    s = stream(window=2, rx_buffer=1000)
+    s.start(program_items(["G1 X1", "G1 X2"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    s.on_resend(3, 0.1)  # confirms 1 and 2
+    assert s.on_ok(0.1) is Step.IGNORED  # the request's own ok (head rejected)
+    assert s.on_ok(0.2) is Step.IGNORED  # copy 2: confirmed already
+
+
+def test_code_of_takes_the_first_word():
+    assert code_of("G28 X Y") == "G28" and code_of("  m400  ") == "M400"

@@ -185,7 +185,7 @@ class SerialPrinter(PrintLink):
             while (ev := self._get_event(quiet)) is not None:
                 if isinstance(ev, BaseException):
                     raise LinkLost(f"printer port {self.port} closed while connecting: {ev}")
-        self._stream.reset_numbering(hello, time.monotonic())
+        self._stream.reset_numbering(time.monotonic())
 
     def close(self) -> None:
         """Close the port (does not stop the printer; cancel first for that)."""
@@ -347,7 +347,7 @@ class SerialPrinter(PrintLink):
                 self._write(frame)
             if stream.finished():
                 return None
-            deadline = stream.deadline(now)
+            deadline = stream.deadline()
             if deadline is None and stream.paused and stream.poll_interval > 0:
                 deadline = stream.last_poll + stream.poll_interval
             wake = deadline

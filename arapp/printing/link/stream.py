@@ -173,11 +173,11 @@ class LineStream:
     max_inflight: int = 0
 
     # ------------------------------------------------------------------ setup
-    def reset_numbering(self, hello: bytes, now: float) -> None:
-        """After `N0 M110 N0` was answered: line 0 is confirmed, the next is 1."""
+    def reset_numbering(self, now: float) -> None:
+        """After `N0 M110 N0` was answered: line 0 is confirmed, the next is 1 (line 0 is never sent
+        again: a request for it stops the stream)."""
         self.history.clear()
         self.inflight.clear()
-        self.history[0] = (hello, Item("M110 N0"))
         self.next_number, self.top, self.confirmed = 1, 0, 0
         self.honoured, self.absorb_oks = None, 0
         self.last_answer = self.last_alive = now
@@ -346,7 +346,7 @@ class LineStream:
                 return abs(reply.temperatures[name][0] - target) > HEAT_WINDOW_C
         return False
 
-    def deadline(self, now: float) -> float | None:
+    def deadline(self) -> float | None:
         """When `on_timeout` is due (None: nothing in flight, no timer)."""
         if not self.inflight:
             return None
@@ -365,7 +365,7 @@ class LineStream:
 
     def on_timeout(self, now: float) -> Step | Stop:
         """No answer by the deadline: send again from the first line not confirmed, or give up."""
-        deadline = self.deadline(now)
+        deadline = self.deadline()
         if deadline is None or now < deadline:
             return Step.WAITING
         self.consecutive_timeouts += 1
