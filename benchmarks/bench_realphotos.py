@@ -70,7 +70,8 @@ def run(quick: bool = False) -> str:
         f"| OpenCV ArUco-based `QRCodeDetectorAruco.detectAndDecodeMulti` (fastest) | {qr['aruco_qr']} |",
         f"| arapp QR anchors with a pose | {qr['arapp']} |",
         f"| of those the classic detector reads | {qr['arapp_of_classic']} of {qr['classic']} |",
-        f"| arapp time per photo (one frame: search, decode, pose; both detectors when needed), median | {np.median(qr['ms']):.1f} ms |",
+        "| arapp time per photo (one frame: search, decode, pose; both detectors when needed), median | "
+        f"{np.median(qr['ms']):.1f} ms |",
         "",
         "ArUco markers (each photo's own dictionary; OpenCV's ArucoDetector with CORNER_REFINE_SUBPIX against "
         "arapp's detection with every id of the dictionary as an anchor). An id OpenCV sees twice (the "
@@ -90,7 +91,8 @@ def run(quick: bool = False) -> str:
         f"{board.position_diff * 1000:.2f} mm | {board.position_sigma * 1000:.2f} mm | "
         f"{board.rotation_diff_deg:.3f} deg | {board.rotation_sigma_deg:.3f} deg |",
         f"| singlemarkerssource.jpg, 6 lone 50 mm markers (worst) | 1 / 1 | "
-        f"{max(c.position_diff for c in singles) * 1000:.2f} mm | {min(c.position_sigma for c in singles) * 1000:.2f} mm | "
+        f"{max(c.position_diff for c in singles) * 1000:.2f} mm | "
+        f"{min(c.position_sigma for c in singles) * 1000:.2f} mm | "
         f"{max(c.rotation_diff_deg for c in singles):.3f} deg | {min(c.rotation_sigma_deg for c in singles):.3f} deg |",
     ]
     return "\n".join(lines)

@@ -229,5 +229,6 @@ def qr_anchor_check(name: str) -> QRCheck:
     else:
         f = float(w)
     cam = Camera([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]], None, w, h)
-    res = AnchorTracker(parse_anchors([{"kind": "qr", "text": text, "length": 0.05}]), cam, filter=False).process(gray, 0.0)
+    tracker = AnchorTracker(parse_anchors([{"kind": "qr", "text": text, "length": 0.05}]), cam, filter=False)
+    res = tracker.process(gray, 0.0)
     return QRCheck(name, text, classic, res.raw_world_from_camera is not None and res.anchors_seen == [0], res.ms)

@@ -52,7 +52,8 @@ def aruco_dictionary(name: str, where: str = "dictionary") -> cv2.aruco.Dictiona
             fs.release()
         if not ok or d.bytesList is None or len(d.bytesList) == 0 or d.markerSize < 2:
             raise SessionError(f"{where}: {str(path)!r} is not an OpenCV dictionary file (it needs nmarkers, "
-                               f"markersize and marker_0, marker_1, ... as cv2.aruco.Dictionary.writeDictionary writes)")
+                               f"markersize and marker_0, marker_1, ... as cv2.aruco.Dictionary.writeDictionary "
+                               f"writes)")
         _CACHE[key] = d
     return _CACHE[key]
 
