@@ -27,6 +27,7 @@ import numpy as np
 from tracking.calibration import BoardSpec, CalibrationResult, ViewCollector, solve
 from tracking.default_intrinsics import estimated_camera
 from tracking.errors import CalibrationError
+from tracking.printables import write_sheet
 from tracking.session import AnchorSpec
 
 DEFAULT_BOARD = BoardSpec("charuco", 7, 5, 0.03, 0.022, "DICT_5X5_100")
@@ -54,8 +55,6 @@ def board_anchor(board: BoardSpec = DEFAULT_BOARD) -> AnchorSpec:
 def write_board_sheet(folder: str | Path, board: BoardSpec = DEFAULT_BOARD, page: str = "A4",
                       dpi: float = 300.0) -> list[Path]:
     """The board to print at true scale: calibration_board.png / .pdf (and .anchors.json) in `folder`."""
-    from tracking.printables import write_sheet
-
     return write_sheet(board_anchor(board), folder, "calibration_board", dpi=dpi, page=page)
 
 

@@ -9,7 +9,6 @@ the distances are rounded to centimetres for display.
 
 from __future__ import annotations
 
-import math
 
 # A marker whose side spans fewer pixels than this is not read reliably (a 4x4 ArUco marker has 6 cells
 # across with its border: ~4 px per cell; blur and perspective need the margin).

@@ -18,6 +18,7 @@ import threading
 from typing import Callable
 
 import numpy as np
+from tracking.printables import sheet
 from PySide6.QtCore import QObject, Qt, Signal
 from PySide6.QtGui import QImage, QPixmap
 from PySide6.QtWidgets import (
@@ -36,6 +37,7 @@ from PySide6.QtWidgets import (
 from arapp import camera_store
 from arapp.calibration_session import (
     TILT_BINS,
+    board_anchor,
     CalibrationSession,
     SessionResult,
     collect_from_source,
@@ -127,10 +129,6 @@ class CalibrationWizard(QDialog):
         return page
 
     def _set_board_preview(self) -> None:
-        from tracking.printables import sheet
-
-        from arapp.calibration_session import board_anchor
-
         img, _ = sheet(board_anchor(self.session.board), dpi=50.0, page="A4")
         self.board_preview.setPixmap(QPixmap.fromImage(bgr_to_qimage(img)))
 

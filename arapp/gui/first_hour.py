@@ -13,10 +13,12 @@ from __future__ import annotations
 from pathlib import Path
 
 from PySide6.QtCore import Qt
-from PySide6.QtWidgets import QMenu
+from PySide6.QtGui import QAction
+from PySide6.QtWidgets import QDockWidget, QMenu, QScrollArea
 
 from tracking.default_intrinsics import is_estimated
 
+from arapp.app import sourcespec
 from arapp.gui.calibration_wizard import CalibrationWizard
 from arapp.gui.help import add_help_menu
 from arapp.gui.printer_setup import PrinterSetupDialog
@@ -28,8 +30,6 @@ DEMO_MODEL = Path(__file__).resolve().parents[2] / "models" / "vase.json"
 def fit_to_screen(window) -> None:
     """Side panels scroll instead of setting the window's minimum height, and the window is no larger than
     the screen's available area (a 1366x768 laptop screen showed neither the replay bar nor the status bar)."""
-    from PySide6.QtWidgets import QDockWidget, QScrollArea
-
     for dock in window.findChildren(QDockWidget):
         inner = dock.widget()
         if inner is None or isinstance(inner, QScrollArea):
@@ -55,10 +55,8 @@ def calibratable(spec: str | None, info) -> bool:
     carries its camera, nor an OAK device, calibrated at the factory)."""
     if not spec or info is None:
         return False
-    from arapp.app.sourcespec import recording_folder, split_calibration
-
-    base, _ = split_calibration(spec)
-    return recording_folder(base) is None and not base.startswith("depthai")
+    base, _ = sourcespec.split_calibration(spec)
+    return sourcespec.recording_folder(base) is None and not base.startswith("depthai")
 
 
 class FirstHour:
@@ -110,8 +108,6 @@ class FirstHour:
         add_help_menu(self.w, extra=[("Getting started", lambda: self.show_welcome(True))])
 
     def _action(self, text, slot):
-        from PySide6.QtGui import QAction
-
         a = QAction(text, self.w)
         a.triggered.connect(slot)
         return a
@@ -153,22 +149,20 @@ class FirstHour:
     def calibrate(self) -> None:
         """The wizard on the open camera or video (the camera is released meanwhile and reopened after, with
         the new calibration); with none open, on the first attached camera."""
-        from arapp.app.sourcespec import list_devices, open_spec, split_calibration
-
         s = self.w.session
         spec = s.source_spec if calibratable(s.source_spec, s.source_info) else None
         if spec is None:
-            devices = [d for d, _ in list_devices() if d.startswith("v4l2")]
+            devices = [d for d, _ in sourcespec.list_devices() if d.startswith("v4l2")]
             if not devices:
                 self.w.show_error("No camera to calibrate", "connect a webcam, or open a video of the "
                                   "calibration board first (File > Open source)")
                 return
             spec = devices[0]
-        base, _ = split_calibration(spec)
+        base, _ = sourcespec.split_calibration(spec)
         was_open = s.source_spec == spec
         if was_open:
             s.close_source()  # a camera can be opened by one reader at a time
-        wizard = CalibrationWizard(lambda: open_spec(base), parent=self.w)
+        wizard = CalibrationWizard(lambda: sourcespec.open_spec(base), parent=self.w)
         wizard.calibrated.connect(lambda _path, _cam: self.w.statusBar().showMessage(
             f"Calibration saved: {_path}", 10000))
         wizard.finished.connect(lambda _r: self.w.open_source(base) if was_open or wizard.saved_path else None)

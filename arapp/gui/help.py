@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import platform
 
+import cv2
+import numpy as np
+import PySide6
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QAction, QKeySequence
 from PySide6.QtWidgets import (
     QDialog,
     QDialogButtonBox,
     QHeaderView,
-    QLabel,
     QMenu,
     QMessageBox,
     QTableWidget,
@@ -19,6 +21,9 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
     QWidget,
 )
+
+from arapp import __version__
+from arapp.user_config import config_dir
 
 # what the pointer does in the view (not actions, so not in the window's action list)
 POINTER_HELP = [
@@ -68,13 +73,6 @@ class ShortcutsDialog(QDialog):
 
 def about_text() -> str:
     """The About box's text (rich text): version, the libraries doing the work, the config folder."""
-    import cv2
-    import numpy as np
-    import PySide6
-
-    from arapp import __version__
-    from arapp.user_config import config_dir
-
     return (f"<h3>arapp {__version__}</h3>"
             "<p>Augmented reality on printed markers: track the camera, show a NURBS model on the marker, "
             "edit it, and print it at the size seen.</p>"

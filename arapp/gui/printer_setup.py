@@ -33,7 +33,9 @@ from PySide6.QtWidgets import (
 from arapp import user_config
 from arapp.gui.tasks import Task
 from arapp.printing import connection_check as cc
+from arapp.printing.link.octoprint import ApiKeyError
 from arapp.printing.presets import PRESETS, preset_profile
+from arapp.printing.profile import ProfileError, load_profile
 
 STATE_KEY = "printer"
 BAUDS = (115200, 250000, 230400, 57600, 500000, 1000000)
@@ -160,16 +162,12 @@ class PrinterSetupDialog(QDialog):
         self._show_profile()
 
     def current_profile(self):
-        from arapp.printing.profile import load_profile
-
         data = self.profile.currentData()
         if isinstance(data, str) and data.startswith("preset:"):
             return preset_profile(data[len("preset:"):])
         return load_profile(data)
 
     def _show_profile(self) -> None:
-        from arapp.printing.profile import ProfileError
-
         try:
             self.profile_info.setText(profile_summary(self.current_profile()))
         except (ProfileError, OSError) as exc:
@@ -242,8 +240,6 @@ class PrinterSetupDialog(QDialog):
 
     def save(self) -> None:
         """Remember the choice; with OctoPrint and a pasted key, store the key (mode 600)."""
-        from arapp.printing.link.octoprint import ApiKeyError
-
         choice = self.choice()
         if choice["link"] == "octoprint" and self.key.text().strip():
             try:

@@ -17,6 +17,7 @@ from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
     QFrame,
     QGridLayout,
+    QHBoxLayout,
     QLabel,
     QListWidget,
     QListWidgetItem,
@@ -24,6 +25,8 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
     QWidget,
 )
+
+from tracking.default_intrinsics import is_estimated
 
 from arapp.guidance import lost_hint
 
@@ -159,8 +162,6 @@ class CalibrationBanner(QFrame):
     calibrate_requested = Signal()
 
     def __init__(self, parent=None):
-        from PySide6.QtWidgets import QHBoxLayout
-
         super().__init__(parent)
         self.setObjectName("calibration_banner")
         self.setStyleSheet("#calibration_banner { background: #fff3cd; color: #5c4400; }")
@@ -175,6 +176,4 @@ class CalibrationBanner(QFrame):
         self.hide()
 
     def set_camera(self, camera) -> None:
-        from tracking.default_intrinsics import is_estimated
-
         self.setVisible(is_estimated(camera))

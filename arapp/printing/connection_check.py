@@ -17,7 +17,15 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+import requests
+from serial.tools import list_ports as lp
+
+from arapp.printing.link.base import LinkError
+from arapp.printing.link.factory import OctoPrintTarget, SerialTarget
 from arapp.printing.link.octoprint import ApiKeyError, load_api_key, save_api_key
+from arapp.printing.link.serial_link import SerialPrinter
+from arapp.printing.presets import preset_profile
+from arapp.printing.profile import load_profile
 from arapp.user_config import secret_path
 
 # a serial check gives up after this long without an `ok` (the printer's 15 s default is for prints)
@@ -36,8 +44,6 @@ class CheckResult:
 def list_ports() -> list[tuple[str, str]]:
     """(device, description) of the serial ports present, USB ones first; the description adds the
     maker's product name when the port has one."""
-    from serial.tools import list_ports as lp
-
     out = []
     for p in lp.comports():
         desc = p.description if p.description and p.description != "n/a" else ""
@@ -57,9 +63,6 @@ def firmware_name(m115: str) -> str:
 
 def check_serial(port: str, baud: int = 115200, timeout_s: float = SERIAL_CHECK_TIMEOUT_S) -> CheckResult:
     """Open `port`, say hello (M110), ask M115, close. Never raises for a printer that is off or absent."""
-    from arapp.printing.link.base import LinkError
-    from arapp.printing.link.serial_link import SerialPrinter
-
     if not port:
         return CheckResult(False, "Choose the printer's port first", {})
     link = SerialPrinter(port, int(baud), connect_timeout=timeout_s, boot_wait=min(2.0, timeout_s / 2))
@@ -77,8 +80,6 @@ def check_serial(port: str, baud: int = 115200, timeout_s: float = SERIAL_CHECK_
 
 def check_octoprint(url: str, api_key: str, timeout_s: float = 5.0) -> CheckResult:
     """Ask OctoPrint at `url` for its version and the printer's connection state."""
-    import requests
-
     url = url.strip().rstrip("/")
     if not re.match(r"^https?://", url):
         return CheckResult(False, f"OctoPrint address must start with http:// or https://, got {url!r}", {})
@@ -131,8 +132,6 @@ def saved_target(choice: dict):
     """The printer-link target (arapp.printing.link.factory SerialTarget / OctoPrintTarget) of a saved
     printer set-up (arapp.gui.printer_setup.saved_choice()), or None when it names no port or server.
     An OctoPrint target points at the stored key file."""
-    from arapp.printing.link.factory import OctoPrintTarget, SerialTarget
-
     if choice.get("link") == "octoprint":
         url = str(choice.get("url") or "").strip().rstrip("/")
         return OctoPrintTarget(url, str(octoprint_key_path(url))) if url else None
@@ -142,9 +141,6 @@ def saved_target(choice: dict):
 
 def saved_profile(choice: dict):
     """The printer profile of a saved set-up (a preset or a profile file), or None when it names none."""
-    from arapp.printing.presets import preset_profile
-    from arapp.printing.profile import load_profile
-
     profile = choice.get("profile")
     if not isinstance(profile, str) or not profile or profile == "file":
         return None
