@@ -17,7 +17,7 @@ import queue
 import time
 from typing import Callable
 
-from arapp.app.live import LiveEngine
+from arapp.app.live import EngineFacade, LiveEngine
 
 
 class EventQueue:
@@ -53,7 +53,7 @@ class EventQueue:
         return True
 
 
-class HeadlessEngine:
+class HeadlessEngine(EngineFacade):
     """A `LiveEngine` seen through an `EventQueue`: the engine interface `Session` uses."""
 
     def __init__(self, live: LiveEngine, events: EventQueue, handlers):
@@ -61,26 +61,6 @@ class HeadlessEngine:
         for name in ("opened", "ready", "error", "ended", "recorded", "toolpaths"):
             handler = getattr(handlers, name)
             getattr(live.events, name).connect(lambda *a, h=handler: events.post(h, *a))
-
-    def send(self, command) -> None:
-        self.live.apply(command)
-
-    def start(self) -> None:
-        self.live.start()
-
-    def stop(self, wait: float = 0.0) -> None:
-        self.live.stop(wait)
-
-    def take(self):
-        return self.live.take()
-
-    @property
-    def running(self) -> bool:
-        return self.live.running
-
-    @property
-    def playing(self) -> bool:
-        return self.live.playing
 
 
 def headless_engine_factory(events: EventQueue, **engine_options) -> Callable:

@@ -65,6 +65,34 @@ def default_pipeline(source, info: SourceInfo) -> Pipeline:
     return Pipeline(info.camera, info.anchors, status_line=False)
 
 
+class EngineFacade:
+    """The engine interface `Session` uses (`send`, `start`, `stop`, `take`, `running`, `playing`), over a
+    LiveEngine in `self.live` (the headless and the GUI's thread engine share it)."""
+
+    live: "LiveEngine"
+
+    def send(self, command) -> None:
+        """Apply an arapp.app.commands command (the threads pick it up between frames)."""
+        self.live.apply(command)
+
+    def start(self) -> None:
+        self.live.start()
+
+    def stop(self, wait: float = 0.0) -> None:
+        self.live.stop(wait)
+
+    def take(self):
+        return self.live.take()
+
+    @property
+    def running(self) -> bool:
+        return self.live.running
+
+    @property
+    def playing(self) -> bool:
+        return self.live.playing
+
+
 class LiveEngine:
     """One open source, its Player and Processor threads, and the commands that steer them.
 

@@ -25,8 +25,12 @@ from arapp.app.toolpaths import preview_spec, summarize
 from arapp.placement import Placement, placement_from_any
 from arapp.printing import SliceCancelled, load_profile, placed_solid, slice_mesh
 from arapp.printing.gcode import parse_gcode
+from arapp.printing.prusa import slice_with_prusa
 
 KEEP_SLICES = 10
+# The slicers a print can use: name -> slice(mesh_mm, settings, profile, progress=, cancel=) -> SliceResult.
+# Adding one is one function with that signature and one row here (the print dialog lists the names).
+SLICERS = {"built-in": slice_mesh, "PrusaSlicer": slice_with_prusa}
 
 
 def prune_slices(folder: Path, keep: int = KEEP_SLICES) -> None:
@@ -45,11 +49,13 @@ def default_work_dir() -> Path:
     return Path.home() / ".arapp" / "print-jobs"
 
 
-def slice_job(model, matrix, settings, profile, profile_name: str, job_gcode: Path, progress, cancel):
-    """Worker thread: the placed solid sliced; the G-code written to `job_gcode` (the copy the preview
-    and the printer job read) with its summary. Returns (result, gcode path, summary, profile, name)."""
+def slice_job(model, matrix, settings, profile, profile_name: str, job_gcode: Path, progress, cancel,
+              slicer: str = "built-in"):
+    """Worker thread: the placed solid sliced by `slicer` (a SLICERS name); the G-code written to
+    `job_gcode` (the copy the preview and the printer job read) with its summary. Returns (result, gcode
+    path, summary, profile, name)."""
     solid = placed_solid(model, matrix, profile=profile)
-    result = slice_mesh(solid, settings, profile, progress=progress, cancel=cancel)
+    result = SLICERS[slicer](solid, settings, profile, progress=progress, cancel=cancel)
     job_gcode.parent.mkdir(parents=True, exist_ok=True)
     job_gcode.write_text(result.gcode)
     prune_slices(job_gcode.parent)
@@ -105,10 +111,13 @@ class PrintSession:
     def slicing(self) -> bool:
         return self._slice_task is not None and self._slice_task.running
 
-    def slice(self, settings, profile_name: str) -> bool:
+    def slice(self, settings, profile_name: str, slicer: str = "built-in") -> bool:
         """Slice with `settings` (arapp.printing.SliceSettings) for the printer profile `profile_name` (a
-        shipped name or a file); False (reported) when the profile cannot be read."""
+        shipped name or a file) with `slicer` (a SLICERS name); False (reported) when the profile cannot be
+        read or the slicer is unknown."""
         try:
+            if slicer not in SLICERS:
+                raise ValueError(f"unknown slicer {slicer!r}; the slicers are {', '.join(SLICERS)}")
             profile = load_profile(profile_name)
         except (ValueError, OSError) as exc:
             self.fail("Cannot slice", exc)
@@ -126,7 +135,8 @@ class PrintSession:
                 self.run.post(self.events.slice_progress.emit, f)
 
         self._slice_task = self.run.run(slice_job, self.model, self.model_to_placement_mm(), settings, profile,
-                                        str(profile_name), job_gcode, progress, cancel, done=self._slice_done,
+                                        str(profile_name), job_gcode, progress, cancel, slicer,
+                                        done=self._slice_done,
                                         failed=self._slice_failed, name="arapp-slice")
         if self._slice_task is not None:
             self._slice_task.cancel = cancel

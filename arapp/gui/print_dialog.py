@@ -135,7 +135,7 @@ class PrintDialog(QDialog):
             b.setEnabled(on)
         self.slice_progress.setValue(0)
         self.slice_label.setText("Slicing...")
-        if not self.session.slice(settings, self.profile.currentText()):
+        if not self.session.slice(settings, self.profile.currentText(), self.slicer.currentText()):
             self._slice_finished()
 
     def _slice_progress(self, fraction: float) -> None:

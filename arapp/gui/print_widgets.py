@@ -13,6 +13,7 @@ from PySide6.QtWidgets import (
     QPushButton, QRadioButton, QSlider, QSpinBox, QVBoxLayout,
 )
 
+from arapp.app.print_session import SLICERS
 from arapp.gui.temperature_graph import TemperatureGraph
 from arapp.printing import MATERIALS
 from arapp.printing.profile import shipped_profiles
@@ -52,8 +53,10 @@ def slicing_box(dlg) -> QGroupBox:
     dlg.layer_height = _spin(QDoubleSpinBox(), 0.05, 0.6, " mm", step=0.05, decimals=2)
     dlg.infill = _spin(QSpinBox(), 0, 100, " %")
     dlg.perimeters = _spin(QSpinBox(), 1, 10)
+    dlg.slicer = QComboBox()
+    dlg.slicer.addItems(list(SLICERS))
     for label, w in (("Printer", dlg.profile), ("Material", dlg.material), ("Layer height", dlg.layer_height),
-                     ("Infill", dlg.infill), ("Perimeters", dlg.perimeters)):
+                     ("Infill", dlg.infill), ("Perimeters", dlg.perimeters), ("Slicer", dlg.slicer)):
         form.addRow(label, w)
     row = QHBoxLayout()
     dlg.slice_button = _button("Slice", dlg.start_slice)
@@ -149,7 +152,7 @@ def settings_values(dlg) -> dict:
     """The dialog's choices as stored under print/ in the settings."""
     return {"profile": dlg.profile.currentText(), "material": dlg.material.currentText(),
             "layer_height": dlg.layer_height.value(), "infill": dlg.infill.value(),
-            "perimeters": dlg.perimeters.value(), "octoprint_url": dlg.octoprint_url.text(),
+            "perimeters": dlg.perimeters.value(), "slicer": dlg.slicer.currentText(), "octoprint_url": dlg.octoprint_url.text(),
             "api_key_file": dlg.api_key_file.text(),
             "link": "octoprint" if dlg.use_octoprint.isChecked() else "serial"}
 
@@ -164,6 +167,7 @@ def restore_settings(dlg, settings) -> None:
     dlg.layer_height.setValue(float(get("layer_height", 0.2)))
     dlg.infill.setValue(int(float(get("infill", 20))))
     dlg.perimeters.setValue(int(float(get("perimeters", 2))))
+    dlg.slicer.setCurrentText(str(get("slicer", "built-in")))
     dlg.octoprint_url.setText(str(get("octoprint_url", "")))
     dlg.api_key_file.setText(str(get("api_key_file", "")))
     if str(get("link", "serial")) == "octoprint":

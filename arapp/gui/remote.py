@@ -175,9 +175,9 @@ def child_main(conn, spec, anchors_json, speed, loop, playing, full_frames, disp
 # ------------------------------------------------------------------------------------------------ UI
 
 
-class RemoteEngine(QObject):
-    """`workers.Engine`'s interface, with the LiveEngine in a child process. Signals are delivered on the
-    UI thread: opened(SourceInfo), frame_ready(), error(title, message), ended(), recorded(folder),
+class EngineSignals(QObject):
+    """The signals of both GUI engines, delivered on the UI thread: opened(SourceInfo), frame_ready(),
+    error(title, message), ended() (a recording reached its end without loop), recorded(folder),
     toolpaths_shown(info)."""
 
     opened = Signal(object)
@@ -186,6 +186,10 @@ class RemoteEngine(QObject):
     ended = Signal()
     recorded = Signal(str)
     toolpaths_shown = Signal(object)
+
+
+class RemoteEngine(EngineSignals):
+    """`workers.Engine`'s interface, with the LiveEngine in a child process."""
 
     def __init__(self, spec: str, *, name: str = "", anchors_json: list | None = None, speed: float = 1.0,
                  loop: bool = False, playing: bool = True, full_frames: bool = False, parent=None):

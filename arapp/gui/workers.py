@@ -15,12 +15,12 @@ import threading
 from typing import Any, Callable
 
 import numpy as np
-from PySide6.QtCore import QObject, Signal
+from PySide6.QtCore import QObject
 from PySide6.QtGui import QImage
 
-from arapp.app.live import LiveEngine, SourceInfo, default_pipeline
+from arapp.app.live import EngineFacade, LiveEngine, SourceInfo, default_pipeline
 from arapp.app.processor import Shown, to_bgra
-from arapp.gui.remote import RemoteEngine
+from arapp.gui.remote import EngineSignals, RemoteEngine
 
 __all__ = ["Engine", "make_engine", "bgr_qimage", "qimage_from_bgra", "SourceInfo", "Shown"]
 
@@ -41,17 +41,9 @@ def bgr_qimage(image: np.ndarray) -> QImage:
     return qimage_from_bgra(to_bgra(image))
 
 
-class Engine(QObject):
-    """One open source with its two worker threads in this process, seen from the UI thread through signals:
-    opened(SourceInfo), frame_ready(), error(title, message), ended() (a recording reached its end without
-    loop), recorded(folder), toolpaths_shown(info). Commands: `send(arapp.app.commands...)`."""
-
-    opened = Signal(object)
-    frame_ready = Signal()
-    error = Signal(str, str)
-    ended = Signal()
-    recorded = Signal(str)
-    toolpaths_shown = Signal(object)
+class Engine(EngineSignals, EngineFacade):
+    """One open source with its two worker threads in this process, seen from the UI thread through the
+    EngineSignals. Commands: `send(arapp.app.commands...)`."""
 
     def __init__(self, spec: str | None = None, *, opener: Callable[[], Any] | None = None, name: str = "",
                  anchors: list | None = None, speed: float = 1.0, loop: bool = False, playing: bool = True,
@@ -78,28 +70,10 @@ class Engine(QObject):
     def info(self) -> SourceInfo | None:
         return self.live.info
 
-    def start(self) -> None:
-        self.live.start()
-
-    def stop(self, wait: float = 0.0) -> None:
-        self.live.stop(wait)
-
-    @property
-    def running(self) -> bool:
-        return self.live.running
-
-    @property
-    def playing(self) -> bool:
-        return self.live.playing
-
     def take(self) -> Shown | None:
         """The newest processed frame (None when nothing new); call from the UI thread on frame_ready."""
         self._notify_pending.clear()
         return self.live.take()
-
-    def send(self, command) -> None:
-        """Apply an arapp.app.commands command (the threads pick it up between frames)."""
-        self.live.apply(command)
 
 
 def make_engine(kind: str, spec: str, *, name: str, anchors: list, speed: float, loop: bool, handlers,
