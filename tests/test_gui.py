@@ -385,6 +385,10 @@ def test_print_dialog_slices_saves_and_reports_a_printer_error(qtbot, window, tm
     message = [m for t, m in window.errors if t == "Printer error"][-1]
     assert "ttyNOPE" in message
     qtbot.waitUntil(lambda: dlg.send_button.isEnabled(), timeout=5000)
+    # a target the dialog cannot make (a baud rate that is not a number): told to the user, nothing started
+    dlg.baud.setCurrentText("fast")
+    qtbot.mouseClick(dlg.send_button, Qt.MouseButton.LeftButton)
+    assert any(t == "Printer error" and "baud rate" in m for t, m in window.errors) and not dlg.printing
     dlg.close()
 
 

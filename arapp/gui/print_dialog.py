@@ -127,7 +127,7 @@ class PrintDialog(QDialog):
         try:
             settings = self.slice_settings()
         except ValueError as exc:
-            self.error.emit("Cannot slice", str(exc))
+            self.session.fail("Cannot slice", exc)
             return
         self._save_settings()
         for b, on in ((self.save_button, False), (self.send_button, False), (self.slice_button, False),
@@ -262,7 +262,7 @@ class PrintDialog(QDialog):
         try:
             target = self.target()
         except ValueError as exc:
-            self.error.emit("Printer error", str(exc))
+            self.session.fail("Printer error", exc)
             return
         if not ps.start_print(target, self.profile.currentText()):
             return
