@@ -18,20 +18,8 @@ FILL_FRACTION = 0.8
 
 
 def anchor_phrase(spec) -> str:
-    """One anchor as a user would check it against the printed sheet; lengths in mm."""
-    mm = lambda m: f"{m * 1000:g} mm"  # noqa: E731
-    if spec.kind == "aruco":
-        return f"ArUco id {spec.id}, {spec.dictionary}, {mm(spec.length)}"
-    if spec.kind == "aruco_board":
-        last = spec.first_id + spec.markers_x * spec.markers_y - 1
-        return (f"ArUco board {spec.markers_x} x {spec.markers_y}, {spec.dictionary}, ids {spec.first_id}-{last}, "
-                f"{mm(spec.marker_length)} markers")
-    if spec.kind == "charuco":
-        return (f"ChArUco board {spec.squares_x} x {spec.squares_y}, {spec.dictionary}, "
-                f"{mm(spec.square_length)} squares")
-    if spec.kind == "qr":
-        return f'QR code "{spec.text}", {mm(spec.length)}'
-    return spec.kind
+    """One anchor as a user would check it against the printed sheet; lengths in mm (the kind's words)."""
+    return spec.anchor_kind.describe(spec)
 
 
 def looking_for(anchors) -> str:
@@ -43,12 +31,7 @@ def looking_for(anchors) -> str:
 
 def _smallest_and_extent(spec) -> tuple[float, float]:
     """(side of the smallest marker that must be read, side of the whole pattern), metres."""
-    if spec.kind == "aruco_board":
-        extent = max(spec.markers_x, spec.markers_y) * (spec.marker_length + spec.separation) - spec.separation
-        return spec.marker_length, extent
-    if spec.kind == "charuco":
-        return spec.marker_length, max(spec.squares_x, spec.squares_y) * spec.square_length
-    return spec.length, spec.length
+    return spec.anchor_kind.extent(spec)
 
 
 def distance_range_m(spec, camera) -> tuple[float, float]:

@@ -24,7 +24,6 @@ import numpy as np
 import trimesh
 
 from arapp.geometry.model import Model, Placement
-from tracking.poses import make_pose
 from tracking.slam.flow import lift_to_plane
 from tracking.session import AnchorSpec
 
@@ -39,16 +38,7 @@ def placement_from_any(value, default: Placement | None = None) -> Placement:
 
 def world_from_placement(anchor: AnchorSpec) -> np.ndarray:
     """4x4 transform from the placement frame (anchor centre, z out of the paper, metres) to the world."""
-    if anchor.kind == "aruco_board":
-        w = anchor.markers_x * anchor.marker_length + (anchor.markers_x - 1) * anchor.separation
-        h = anchor.markers_y * anchor.marker_length + (anchor.markers_y - 1) * anchor.separation
-        anchor_from_placement = make_pose(np.diag([1.0, -1.0, -1.0]), [w / 2, h / 2, 0.0])
-    elif anchor.kind == "charuco":
-        w = anchor.squares_x * anchor.square_length
-        h = anchor.squares_y * anchor.square_length
-        anchor_from_placement = make_pose(np.diag([1.0, -1.0, -1.0]), [w / 2, h / 2, 0.0])
-    else:
-        anchor_from_placement = np.eye(4)
+    anchor_from_placement = anchor.anchor_kind.anchor_from_placement(anchor)
     return np.asarray(anchor.world_from_anchor, dtype=float) @ anchor_from_placement
 
 

@@ -36,17 +36,8 @@ def page_size_mm(page: str) -> tuple[float, float]:
 
 
 def describe(spec: AnchorSpec) -> str:
-    """One line naming what is printed, with its sizes in mm."""
-    if spec.kind == "aruco":
-        return f"ArUco {spec.dictionary} id {spec.id}, side {spec.length * 1000:g} mm"
-    if spec.kind == "aruco_board":
-        return (f"GridBoard {spec.markers_x}x{spec.markers_y} {spec.dictionary} ids {spec.first_id}.."
-                f"{spec.first_id + spec.markers_x * spec.markers_y - 1}, markers {spec.marker_length * 1000:g} mm, "
-                f"gaps {spec.separation * 1000:g} mm")
-    if spec.kind == "charuco":
-        return (f"ChArUco {spec.squares_x}x{spec.squares_y} {spec.dictionary} first id {spec.first_id}, squares "
-                f"{spec.square_length * 1000:g} mm, markers {spec.marker_length * 1000:g} mm")
-    return f"QR {spec.text!r}, symbol {spec.length * 1000:g} mm (quiet zone excluded)"
+    """One line naming what is printed, with its sizes in mm (the kind's caption)."""
+    return spec.anchor_kind.caption(spec)
 
 
 def sheet(spec: AnchorSpec, dpi: float = 300.0, page: str = "A4") -> tuple[np.ndarray, dict]:
@@ -73,7 +64,7 @@ def sheet(spec: AnchorSpec, dpi: float = 300.0, page: str = "A4") -> tuple[np.nd
                          f"does not fit a {page} page; choose a larger --page or smaller lengths")
     img = np.full((H, W), 255, np.uint8)
     centre = (lo + hi) / 2
-    flip = -1.0 if spec.kind in ("aruco", "qr") else 1.0  # y up on markers and QR codes, down on boards
+    flip = -spec.anchor_kind.face  # page y runs down: flipped when the printed side faces +z (y up on it)
     # page pixel of the plane point (x, y): the pattern centred a little above the page centre
     cx, cy = (W - 1) / 2, (H - 1) / 2 - 0.01 * ppm
     A = np.array([[ppm, 0, cx - ppm * centre[0]], [0, flip * ppm, cy - flip * ppm * centre[1]], [0, 0, 1.0]])

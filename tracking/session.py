@@ -11,98 +11,19 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import cv2
 import numpy as np
 
+from tracking.anchors.kinds import KINDS, AnchorSpec, kind_names
+from tracking.anchors.kinds.base import aruco_dictionary_names
 from tracking.camera import Camera
 from tracking.errors import CalibrationError, SessionError
 
 FORMAT = "arapp-recording/1"
-ANCHOR_KINDS = ("aruco", "aruco_board", "charuco", "qr")
+# The registered kind names at import time; the table itself (kinds registered later included) is KINDS.
+ANCHOR_KINDS = kind_names()
 
-
-def aruco_dictionary_names() -> list[str]:
-    """Names of OpenCV's predefined ArUco dictionaries (`DICT_4X4_50`, ...)."""
-    return sorted(n for n in dir(cv2.aruco) if n.startswith("DICT_") and isinstance(getattr(cv2.aruco, n), int))
-
-
-@dataclass
-class AnchorSpec:
-    """One anchor of a session. Lengths in metres; `world_from_anchor` a 4x4 rigid transform.
-
-    kinds: `aruco` (id, length), `aruco_board` (markers_x, markers_y,
-    marker_length, separation, first_id), `charuco` (squares_x, squares_y,
-    square_length, marker_length, first_id), `qr` (text, length).
-    """
-
-    kind: str
-    dictionary: str | None = None
-    id: int | None = None
-    length: float | None = None
-    markers_x: int | None = None
-    markers_y: int | None = None
-    marker_length: float | None = None
-    separation: float | None = None
-    first_id: int = 0
-    squares_x: int | None = None
-    squares_y: int | None = None
-    square_length: float | None = None
-    text: str | None = None
-    world_from_anchor: np.ndarray = field(default_factory=lambda: np.eye(4))
-
-    def to_dict(self) -> dict:
-        d = {"kind": self.kind}
-        for k in ("dictionary", "id", "length", "markers_x", "markers_y", "marker_length", "separation",
-                  "squares_x", "squares_y", "square_length", "text"):
-            v = getattr(self, k)
-            if v is not None:
-                d[k] = v
-        if self.kind in ("aruco_board", "charuco"):
-            d["first_id"] = self.first_id
-        if not np.allclose(self.world_from_anchor, np.eye(4)):
-            d["world_from_anchor"] = np.asarray(self.world_from_anchor).tolist()
-        return d
-
-    @property
-    def dictionary_id(self) -> int | str:
-        """OpenCV's id of a predefined dictionary; for a dictionary file, its path (see anchors/dictionaries.py)."""
-        return getattr(cv2.aruco, self.dictionary) if self.dictionary.startswith("DICT_") else self.dictionary
-
-    def marker_ids(self) -> list[int]:
-        """The ArUco ids this anchor uses (empty for QR)."""
-        if self.kind == "aruco":
-            return [self.id]
-        if self.kind == "aruco_board":
-            return list(range(self.first_id, self.first_id + self.markers_x * self.markers_y))
-        if self.kind == "charuco":
-            return list(range(self.first_id, self.first_id + (self.squares_x * self.squares_y) // 2))
-        return []
-
-
-_REQUIRED = {
-    "aruco": {"dictionary": str, "id": int, "length": float},
-    "aruco_board": {"dictionary": str, "markers_x": int, "markers_y": int, "marker_length": float,
-                    "separation": float},
-    "charuco": {"dictionary": str, "squares_x": int, "squares_y": int, "square_length": float,
-                "marker_length": float},
-    "qr": {"text": str, "length": float},
-}
-_OPTIONAL = {"first_id": int, "world_from_anchor": list, "kind": str}
-
-
-def _check_type(value, typ, where):
-    if typ is float:
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-        if not ok:
-            raise SessionError(f"{where}: must be a number, got {value!r}")
-        return float(value)
-    if typ is int:
-        if not isinstance(value, int) or isinstance(value, bool):
-            raise SessionError(f"{where}: must be an integer, got {value!r}")
-        return value
-    if not isinstance(value, typ):
-        raise SessionError(f"{where}: must be a {typ.__name__}, got {value!r}")
-    return value
+__all__ = ["FORMAT", "ANCHOR_KINDS", "AnchorSpec", "aruco_dictionary_names", "parse_rigid", "parse_anchor",
+           "parse_anchors", "Session", "parse_session", "load_session"]
 
 
 def parse_rigid(value, where: str) -> np.ndarray:
@@ -121,47 +42,14 @@ def parse_rigid(value, where: str) -> np.ndarray:
 
 def parse_anchor(d: dict, where: str = "anchors[0]", folder: str | Path | None = None) -> AnchorSpec:
     """An `AnchorSpec` from its JSON block; every error names the field, e.g. `anchors[1].length`.
+    The block's `kind` picks the registered `AnchorKind` (tracking/anchors/kinds), which checks its fields.
     `folder`: where a relative dictionary-file path is read from (default: the current folder)."""
     if not isinstance(d, dict):
         raise SessionError(f"{where}: must be an object")
     kind = d.get("kind")
-    if kind not in _REQUIRED:
-        raise SessionError(f"{where}.kind: must be one of {', '.join(ANCHOR_KINDS)}, got {kind!r}")
-    spec = {}
-    for key, typ in _REQUIRED[kind].items():
-        if key not in d:
-            raise SessionError(f"{where}.{key}: missing (a {kind} anchor needs {', '.join(_REQUIRED[kind])})")
-        spec[key] = _check_type(d[key], typ, f"{where}.{key}")
-    for key in d:
-        if key not in _REQUIRED[kind] and key not in _OPTIONAL:
-            raise SessionError(f"{where}.{key}: unknown key for a {kind} anchor")
-    if "first_id" in d:
-        spec["first_id"] = _check_type(d["first_id"], int, f"{where}.first_id")
-    for key in ("length", "marker_length", "square_length"):
-        if key in spec and spec[key] <= 0:
-            raise SessionError(f"{where}.{key}: must be positive (metres), got {spec[key]}")
-    for key in ("markers_x", "markers_y", "squares_x", "squares_y"):
-        if key in spec and spec[key] < 1:
-            raise SessionError(f"{where}.{key}: must be at least 1, got {spec[key]}")
-    if "separation" in spec and spec["separation"] < 0:
-        raise SessionError(f"{where}.separation: must not be negative")
-    if "dictionary" in spec:
-        from tracking.anchors.dictionaries import dictionary_size, is_custom
-        names = aruco_dictionary_names()
-        if is_custom(spec["dictionary"]):  # a dictionary file (custom markers), relative to the recording folder
-            spec["dictionary"] = str((Path(folder or ".") / spec["dictionary"]).resolve())
-        elif spec["dictionary"] not in names:
-            raise SessionError(
-                f"{where}.dictionary: {spec['dictionary']!r} is not an OpenCV ArUco dictionary; "
-                f"use one of {', '.join(names[:6])}, ... or a dictionary file (.yml)"
-            )
-        size = dictionary_size(spec["dictionary"], f"{where}.dictionary")
-        a = AnchorSpec(kind=kind, **spec)
-        ids = a.marker_ids()
-        if ids and (min(ids) < 0 or max(ids) >= size):
-            raise SessionError(f"{where}: marker ids {min(ids)}..{max(ids)} do not fit {spec['dictionary']}, "
-                               f"which has ids 0..{size - 1}")
-    anchor = AnchorSpec(kind=kind, **spec)
+    if not isinstance(kind, str) or kind not in KINDS:
+        raise SessionError(f"{where}.kind: must be one of {', '.join(KINDS)}, got {kind!r}")
+    anchor = KINDS[kind].parse(d, where, folder)
     if "world_from_anchor" in d:
         anchor.world_from_anchor = parse_rigid(d["world_from_anchor"], f"{where}.world_from_anchor")
     return anchor

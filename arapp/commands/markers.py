@@ -1,15 +1,34 @@
 """`arapp markers`: printable anchor sheets (PNG + PDF at true scale) with their session `anchors` block."""
 
+from tracking.anchors.defaults import DEFAULT_DICTIONARY
+
 HELP = "write printable ArUco markers, GridBoards, ChArUco boards or QR codes (PDF + PNG, true scale) and their anchors JSON"
 
-# Markers of a dictionary whose codes are far apart (at least 12 of 36 bits differ, rotations included):
-# printed patterns that are not markers (a 4x4 "fragile glass" icon on a parcel decodes as DICT_4X4_50 id
-# 17) match one of its codes far less often than in the 4x4 dictionaries. See docs/markers.md.
-DEFAULT_DICTIONARY = "DICT_ARUCO_MIP_36h12"
+__all__ = ["HELP", "DEFAULT_DICTIONARY", "add_arguments", "run"]
+
+
+def _printable_kinds() -> dict:
+    """`arapp markers KIND` name -> the registered AnchorKind that prints it."""
+    # imported here, not at the top: the kinds import OpenCV, and cli.py builds every command's parser
+    # for `arapp --help`, which stays fast
+    from tracking.anchors.kinds import KINDS
+
+    return {k.cli_name: k for k in KINDS.values() if k.cli_name}
+
+
+class _PrintableKindNames:
+    """argparse `choices` read from the kinds table when first needed (`arapp markers` runs or shows help)."""
+
+    def __contains__(self, name) -> bool:
+        return name in _printable_kinds()
+
+    def __iter__(self):
+        return iter(_printable_kinds())
 
 
 def add_arguments(parser):
-    parser.add_argument("kind", choices=["aruco", "board", "charuco", "qr"], help="what to print")
+    parser.add_argument("kind", choices=_PrintableKindNames(), metavar="KIND",
+                        help="what to print: aruco, board, charuco, qr (or another registered anchor kind)")
     parser.add_argument("--dictionary", default=DEFAULT_DICTIONARY,
                         help=f"ArUco dictionary (default {DEFAULT_DICTIONARY}: 6x6 bits, codes at least 12 bits apart, "
                         "so packaging icons and other printed squares are not taken for markers as 4x4 ones are; "
@@ -39,27 +58,10 @@ def run(args) -> int:
     from tracking.printables import write_sheet
     from tracking.session import parse_anchor
 
-    if args.kind == "aruco":
-        block = {"kind": "aruco", "dictionary": args.dictionary, "id": args.id, "length": args.length}
-        name = f"aruco_{args.dictionary}_id{args.id}_{args.length * 1000:g}mm"
-    elif args.kind == "board":
-        ml = args.marker_length if args.marker_length is not None else 0.04
-        block = {"kind": "aruco_board", "dictionary": args.dictionary, "markers_x": args.markers_x,
-                 "markers_y": args.markers_y, "marker_length": ml, "separation": args.separation,
-                 "first_id": args.first_id}
-        name = f"board_{args.dictionary}_{args.markers_x}x{args.markers_y}_{ml * 1000:g}mm"
-    elif args.kind == "charuco":
-        ml = args.marker_length if args.marker_length is not None else 0.022
-        block = {"kind": "charuco", "dictionary": args.dictionary,
-                 "squares_x": args.squares_x, "squares_y": args.squares_y, "square_length": args.square_length,
-                 "marker_length": ml, "first_id": args.first_id}
-        name = f"charuco_{block['dictionary']}_{args.squares_x}x{args.squares_y}_{args.square_length * 1000:g}mm"
-    else:
-        block = {"kind": "qr", "text": args.text, "length": args.length}
-        safe = "".join(c if c.isalnum() else "_" for c in args.text)[:24]
-        name = f"qr_{safe}_{args.length * 1000:g}mm"
+    kind = _printable_kinds()[args.kind]
+    block = kind.cli_block(args)
     spec = parse_anchor(block, "anchor")
-    paths = write_sheet(spec, args.output, args.name or name, args.dpi, args.page)
+    paths = write_sheet(spec, args.output, args.name or kind.file_stem(spec), args.dpi, args.page)
     for p in paths:
         print(f"wrote {p}")
     print("anchors block for session.json:")

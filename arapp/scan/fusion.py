@@ -61,7 +61,7 @@ def board_frame(anchors) -> BoardFrame:
 
     model = build_models(list(anchors))[0]
     T = model.world_from_anchor
-    sign = -1.0 if model.kind in ("aruco_board", "charuco") else 1.0
+    sign = model.anchor_kind.face
     up = sign * T[:3, 2]
     e1 = T[:3, 0]
     e2 = np.cross(up, e1)

@@ -15,6 +15,9 @@ from tracking.anchors.model import AnchorModel
 from tracking.anchors.edges import refine_squares
 from tracking.camera import Camera
 
+# the detector families (AnchorKind.detector) found here; "qr" anchors are qr.py's
+ARUCO_FAMILIES = ("aruco", "charuco")
+
 _SUBPIX = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
 
 
@@ -47,7 +50,7 @@ class ArucoDetection:
 
     def __init__(self, models: list[AnchorModel], camera: Camera):
         self.camera = camera
-        self.models = [m for m in models if m.kind != "qr"]
+        self.models = [m for m in models if m.anchor_kind.detector in ARUCO_FAMILIES]
         self.by_dict: dict[str, dict[int, AnchorModel]] = {}  # dictionary name (or file) -> id -> anchor
         for m in self.models:
             ids = self.by_dict.setdefault(m.spec.dictionary, {})
@@ -63,7 +66,7 @@ class ArucoDetection:
         self.detectors = {d: cv2.aruco.ArucoDetector(aruco_dictionary(d), params) for d in self.by_dict}
         self.charuco = {}
         for m in self.models:
-            if m.kind == "charuco":
+            if m.anchor_kind.detector == "charuco":
                 cp = cv2.aruco.CharucoParameters()
                 cp.cameraMatrix = camera.K
                 cp.distCoeffs = camera.dist.reshape(1, -1)
@@ -111,7 +114,7 @@ class ArucoDetection:
                 rest = cv2.cornerSubPix(full, rest, (3, 3), (-1, -1), _SUBPIX)
                 refined[~ok] = rest.reshape(-1, 4, 2)
             found = [(mid, q) for (mid, _, _), q in zip(found, refined)]
-            if m.kind == "charuco":
+            if m.anchor_kind.detector == "charuco":
                 obs = self._charuco(m, full, found)
                 if obs is not None:
                     out.append(obs)
@@ -119,7 +122,7 @@ class ArucoDetection:
             obj = np.concatenate([m.markers[mid] for mid, _ in found])
             img = np.concatenate([c for _, c in found])
             groups = np.repeat([mid for mid, _ in found], 4)
-            out.append(Observation(m.index, obj, img, groups, len(found), square=(m.kind == "aruco")))
+            out.append(Observation(m.index, obj, img, groups, len(found), square=m.anchor_kind.single_square))
         return out
 
     def track(self, gray: np.ndarray, keys: set[tuple[int, int]], camera_from_world: np.ndarray,
@@ -136,7 +139,7 @@ class ArucoDetection:
         if not keys:
             return None
         by_index = {m.index: m for m in self.models}
-        if any(by_index[a].kind == "charuco" for a, _ in keys if a in by_index):
+        if any(by_index[a].anchor_kind.detector == "charuco" for a, _ in keys if a in by_index):
             return None
         keys = [(a, mid) for a, mid in keys if a in by_index]
         world = np.concatenate([by_index[a].to_world(by_index[a].markers[mid]) for a, mid in keys])
@@ -160,7 +163,7 @@ class ArucoDetection:
                 obj = np.concatenate([m.markers[mid] for mid, _ in found])
                 img = np.concatenate([q for _, q in found])
                 out.append(Observation(m.index, obj, img, np.repeat([mid for mid, _ in found], 4), len(found),
-                                       square=(m.kind == "aruco")))
+                                       square=m.anchor_kind.single_square))
         return out
 
     def _charuco(self, m: AnchorModel, gray, found) -> Observation | None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from tracking.anchors.detect import ArucoDetection
+from tracking.anchors.detect import ARUCO_FAMILIES, ArucoDetection
 from tracking.anchors.model import build_models
 from tracking.anchors.pose import solve_pose
 from tracking.camera import Camera
@@ -46,7 +46,7 @@ def diagnose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarray, max_b
         if ids is not None:
             found_by_family[fam] = sorted(set(ids.ravel().tolist()))
     for m in models:
-        if m.kind == "qr" or m.index in seen:
+        if m.anchor_kind.detector not in ARUCO_FAMILIES or m.index in seen:
             continue
         a = m.spec
         fam_declared = a.dictionary.split("_")[1] if a.dictionary.startswith("DICT_") else a.dictionary
@@ -61,7 +61,7 @@ def diagnose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarray, max_b
             desc = "; ".join(f"{f} ids {_ids(v)}" for f, v in others.items())
             hints.append(f"anchors[{m.index}]: no {a.dictionary} markers found, but the image shows markers of "
                          f"another dictionary ({desc}): set anchors[{m.index}].dictionary to the one that was printed")
-    qr_models = [m for m in models if m.kind == "qr"]
+    qr_models = [m for m in models if m.anchor_kind.detector == "qr"]
     if qr_models:
         ok, texts, _, _ = cv2.QRCodeDetector().detectAndDecodeMulti(gray)
         texts = [t for t in (texts if ok else []) if t]
@@ -79,13 +79,14 @@ def diagnose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarray, max_b
             continue
         alone[o.anchor] = sol
         kind = models[o.anchor].kind
-        if kind in ("aruco_board", "charuco") and sol.rms > max_board_rms:
-            fields = "marker_length and separation" if kind == "aruco_board" else "square_length and marker_length"
+        fields = models[o.anchor].anchor_kind.layout_fields
+        if fields and sol.rms > max_board_rms:
             hints.append(f"anchors[{o.anchor}]: the {kind} does not fit its declared layout (reprojection error "
                          f"{sol.rms:.1f} px): check anchors[{o.anchor}].{fields.replace(' and ', ' and .')} "
                          f"against the printed board ({fields} in metres)")
     if len(alone) >= 2:
-        ref = min(alone, key=lambda k: (models[k].kind == "aruco", k))  # boards are the best scale reference
+        # boards are the best scale reference, a lone square the worst
+        ref = min(alone, key=lambda k: (models[k].anchor_kind.single_square, k))
         for k, sol in alone.items():
             if k == ref:
                 continue
@@ -95,7 +96,7 @@ def diagnose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarray, max_b
                                 + alone[ref].camera_from_world[:3, 3])
             ratio = dk / dr if dr > 0 else 1.0
             if abs(ratio - 1.0) > 0.05:
-                field = "length" if models[k].kind in ("aruco", "qr") else "marker_length / square_length"
+                field = models[k].anchor_kind.size_fields
                 hints.append(f"anchors[{k}] looks {ratio:.2f} times as far as anchors[{ref}] says it is: its "
                              f"declared size is probably wrong by that factor (check anchors[{k}].{field}, metres, "
                              f"and its world_from_anchor)")

@@ -58,7 +58,7 @@ class QRTracking:
     """Decodes and tracks the QR anchors of a session. State: each anchor's last finder corners."""
 
     def __init__(self, models: list[AnchorModel], camera: Camera, detector: str = "aruco"):
-        self.models = [m for m in models if m.kind == "qr"]
+        self.models = [m for m in models if m.anchor_kind.detector == "qr"]
         self.by_text = {m.spec.text: m for m in self.models}
         self.camera = camera
         # The ArUco-based detector finds codes fastest; the classic one decodes some it cannot (perspective,

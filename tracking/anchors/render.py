@@ -12,20 +12,14 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from tracking.anchors.model import AnchorModel, build_models, square_corners
+from tracking.anchors.kinds.qr import qr_modules
+from tracking.anchors.model import AnchorModel, build_models
 from tracking.camera import Camera
 from tracking.poses import invert
 from tracking.session import AnchorSpec
 
-
-def qr_modules(text: str) -> np.ndarray:
-    """(N,N) uint8 image of a QR symbol for `text`, one pixel per module, quiet zone removed (0 black, 255 white)."""
-    img = cv2.QRCodeEncoder.create().encode(text)
-    if img is None or img.size == 0:
-        raise ValueError(f"cannot encode {text!r} as a QR code (too long?)")
-    dark = np.argwhere(img < 128)
-    (y0, x0), (y1, x1) = dark.min(axis=0), dark.max(axis=0)
-    return np.ascontiguousarray(img[y0:y1 + 1, x0:x1 + 1])
+# qr_modules lives with the QR kind (tracking/anchors/kinds/qr.py); named here too
+__all__ = ["qr_modules", "marker_bits", "plane_layout", "draw_anchor", "render_view", "look_at"]
 
 
 def marker_bits(dictionary_id: int, marker_id: int) -> np.ndarray:
@@ -39,30 +33,9 @@ def plane_layout(model: AnchorModel, margin: float | None = None):
     """What to draw for one anchor, in its plane frame (metres).
 
     Returns (paper (4,2) corners, black quads list[(4,2)], patches list[(bits image, (4,2) corners TL,TR,BR,BL)]).
-    `margin`: white border around the pattern (default: one marker cell / 4 QR modules, at least 2 mm).
+    `margin`: white border around the pattern (default: the kind's, e.g. one marker cell / 4 QR modules).
     """
-    s = model.spec
-    patches, black = [], []
-    if s.kind == "qr":
-        mod = qr_modules(s.text)
-        corners = square_corners(s.length)[:, :2]
-        patches.append((mod, corners))
-        m = 4 * s.length / mod.shape[0] if margin is None else margin
-    else:
-        d = cv2.aruco.getPredefinedDictionary(s.dictionary_id)
-        for mid, c in model.markers.items():
-            patches.append((marker_bits(s.dictionary_id, mid), c[:, :2]))
-        mlen = s.length if s.kind == "aruco" else s.marker_length
-        m = max(mlen / (d.markerSize + 2), 0.002) if margin is None else margin
-        if s.kind == "charuco":
-            sq = s.square_length
-            centres = np.array([c[:, :2].mean(axis=0) for c in model.markers.values()])
-            for j in range(s.squares_y):
-                for i in range(s.squares_x):
-                    lo = np.array([i * sq, j * sq])
-                    inside = np.all((centres > lo) & (centres < lo + sq), axis=1)
-                    if not inside.any():
-                        black.append(np.array([lo, lo + [sq, 0], lo + [sq, sq], lo + [0, sq]]))
+    patches, black, m = model.anchor_kind.layout(model.spec, model.markers, margin)
     pts = [c for _, c in patches] + black
     allp = np.concatenate(pts, axis=0)
     lo, hi = allp.min(axis=0) - m, allp.max(axis=0) + m
@@ -135,10 +108,9 @@ def render_view(anchors: list[AnchorSpec] | list[AnchorModel], camera: Camera, w
         pc = np.c_[paper_q, np.zeros(4)] @ cfa[:3, :3].T + cfa[:3, 3]
         if np.any(pc[:, 2] <= 1e-3):
             continue  # behind (or at) the camera: not drawn
-        # The printed side faces +z for markers and QR codes, -z for boards (OpenCV's board frame): a sheet
+        # The printed side faces the kind's `face` (+z markers and QR codes, -z OpenCV boards): a sheet
         # seen from behind shows no pattern.
-        front = 1.0 if m.kind in ("aruco", "qr") else -1.0
-        if front * float(cfa[:3, 2] @ -cfa[:3, 3]) <= 0:
+        if m.anchor_kind.face * float(cfa[:3, 2] @ -cfa[:3, 3]) <= 0:
             continue
         H = cam_s.K @ np.c_[cfa[:3, 0], cfa[:3, 1], cfa[:3, 3]]
         draw_anchor(canvas, m, H)
