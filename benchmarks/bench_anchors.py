@@ -48,15 +48,12 @@ def _frames(session, limit):
 
 def choose_plain_qr(limit: int | None = None) -> tuple[str, dict]:
     """Measure OpenCV's QR calls on the tuning QR recording; (fastest that decodes, all measurements)."""
-    from peers import QR_CALLS, choose_qr_call, measure_qr_calls
-    from tracking.slam.scenes import load_recording
+    from peers import QR_CALLS, chosen_qr_call
 
     folder = ROOT / "recordings" / QR_TUNING
     if not (folder / "groundtruth.tum").is_file():
         return "QRCodeDetector.detectAndDecodeMulti", {n: (0, float("nan")) for n in QR_CALLS}
-    frames, session = load_recording(folder, slice(0, limit) if limit else None)
-    measured = measure_qr_calls(frames, session.anchors[0].text)
-    return choose_qr_call(measured), measured
+    return chosen_qr_call(folder, limit)
 
 
 def evaluate(folder: Path, limit: int | None = None, qr_call: str = "QRCodeDetector.detectAndDecodeMulti") -> dict | None:

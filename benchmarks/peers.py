@@ -69,6 +69,22 @@ def choose_qr_call(measured: dict) -> str:
     return min(ok, key=lambda n: measured[n][1])
 
 
+_CHOSEN: dict = {}
+
+
+def chosen_qr_call(folder, limit: int | None = None) -> tuple[str, dict]:
+    """(the QR call `choose_qr_call` picks on the QR recording `folder`, the measurements), measured once per
+    process: the anchors and SLAM sections of one benchmark run use the same call."""
+    key = (str(folder), limit)
+    if key not in _CHOSEN:
+        from tracking.slam.scenes import load_recording
+
+        frames, session = load_recording(folder, slice(0, limit) if limit else None)
+        measured = measure_qr_calls(frames, session.anchors[0].text)
+        _CHOSEN[key] = (choose_qr_call(measured), measured)
+    return _CHOSEN[key]
+
+
 class PlainPeer:
     """The plain OpenCV way for a session's anchors and camera: `pose(image)` -> world_from_camera or None."""
 
