@@ -33,7 +33,9 @@ Progress = Callable[[str, int, int], None]
 class ScanOptions:
     """max_views: views used for depth; min_angle_deg: least angle between chosen views (seen from the
     object); refine: run the SIFT bundle adjustment; voxel: TSDF voxel (m; None = object extent / 90);
-    z_range: depths SGBM searches (m); min_agree: depth maps that must confirm a depth."""
+    z_margin: SGBM searches depths within the board's reach of the look-at point plus this (m);
+    min_agree: depth maps that must confirm a depth; max_frames: frames read at most; keep_frames:
+    candidate views kept in memory (longer recordings are subsampled evenly)."""
 
     max_views: int = 20
     min_angle_deg: float = 7.0
@@ -42,6 +44,7 @@ class ScanOptions:
     z_margin: float = 0.05
     min_agree: int = 2
     max_frames: int | None = None
+    keep_frames: int = 240
 
 
 @dataclass
@@ -68,7 +71,10 @@ def scan(source, camera, anchors, options: ScanOptions | None = None, progress: 
     opt = options or ScanOptions()
     timings, stats = {}, {}
     t = time.perf_counter()
-    views = track_views(source, camera, anchors, progress, cancel, opt.max_frames)
+    # every frame is tracked, but only up to `keep_frames` evenly spread ones are kept in memory as candidates
+    total = getattr(source, "frame_count", 0) or 0
+    every = max(1, -(-total // opt.keep_frames)) if total else 1
+    views = track_views(source, camera, anchors, progress, cancel, opt.max_frames, every=every)
     timings["track_s"] = time.perf_counter() - t
     if len(views) < 3:
         raise RuntimeError(f"only {len(views)} frames were placed from the markers; keep the board in view "
