@@ -10,13 +10,9 @@ from tracking.session import AnchorSpec, parse_anchors
 
 
 def sheet_name(index: int, spec) -> str:
-    """File stem for anchor `index`, e.g. anchor0_aruco_board_DICT_4X4_50."""
-    parts = [f"anchor{index}", spec.kind]
-    if spec.dictionary:
-        parts.append(spec.dictionary)
-    if spec.kind == "aruco":
-        parts.append(f"id{spec.id}")
-    return "_".join(parts)
+    """File stem for anchor `index`: anchor<index>_ and the kind's own stem, e.g.
+    anchor0_board_DICT_4X4_50_4x3_40mm (tracking.anchors.kinds)."""
+    return f"anchor{index}_{spec.anchor_kind.file_stem(spec)}"
 
 
 def save_sheets(anchors, folder: str | Path, dpi: float = 300.0, page: str = "A4") -> list[Path]:

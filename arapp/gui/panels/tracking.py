@@ -26,23 +26,10 @@ STATE_STYLE = {"marker": "color: #2a2; font-weight: bold", "slam": "color: #29c;
 
 
 def anchor_summary(anchor) -> tuple[str, str, str, str]:
-    """(kind, dictionary, ids, size) strings for one AnchorSpec, sizes in millimetres."""
-    ids = anchor.marker_ids()
-    if anchor.kind == "qr":
-        id_text = repr(anchor.text)
-    elif len(ids) > 3:
-        id_text = f"{ids[0]}..{ids[-1]}"
-    else:
-        id_text = ", ".join(str(i) for i in ids)
-    if anchor.kind in ("aruco", "qr"):
-        size = f"{anchor.length * 1e3:g} mm"
-    elif anchor.kind == "aruco_board":
-        size = (f"{anchor.markers_x}x{anchor.markers_y} x {anchor.marker_length * 1e3:g} mm, "
-                f"gap {anchor.separation * 1e3:g} mm")
-    else:
-        size = (f"{anchor.squares_x}x{anchor.squares_y} x {anchor.square_length * 1e3:g} mm, "
-                f"markers {anchor.marker_length * 1e3:g} mm")
-    return anchor.kind, anchor.dictionary or "", id_text, size
+    """(kind, dictionary, ids, size) strings for one AnchorSpec, sizes in millimetres (the kind's own words,
+    tracking.anchors.kinds)."""
+    ids, size = anchor.anchor_kind.summary(anchor)
+    return anchor.kind, anchor.dictionary or "", ids, size
 
 
 class TrackingPanel(QWidget):

@@ -192,7 +192,7 @@ class AnchorKind:
         """(ids, size) for a table of anchors, sizes in mm."""
         ids = self.marker_ids(spec)
         text = f"{ids[0]}..{ids[-1]}" if len(ids) > 3 else ", ".join(str(i) for i in ids)
-        return text, mm(spec.length)
+        return text, mm(spec.length) if spec.length is not None else ""  # boards: their subclass says the size
 
     def file_stem(self, spec: AnchorSpec) -> str:
         """File name stem of its printable sheet."""
