@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from tracking.anchors.kinds import AnchorSpec
+from tracking.anchors.kinds.charuco import charuco_board
 from tracking.camera import Camera
 from tracking.errors import CalibrationError
 
@@ -44,8 +46,10 @@ class BoardSpec:
                 raise CalibrationError(f"{self.dictionary!r} is not an OpenCV ArUco dictionary (e.g. DICT_5X5_100)")
 
     def charuco_board(self) -> cv2.aruco.CharucoBoard:
-        d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, self.dictionary))
-        return cv2.aruco.CharucoBoard((self.squares_x, self.squares_y), self.square_length, self.marker_length, d)
+        """The OpenCV board, made as a `charuco` anchor's (tracking/anchors/kinds/charuco.py), ids from 0."""
+        return charuco_board(AnchorSpec("charuco", dictionary=self.dictionary, squares_x=self.squares_x,
+                                        squares_y=self.squares_y, square_length=self.square_length,
+                                        marker_length=self.marker_length))
 
     def corner_count(self) -> int:
         return (self.squares_x - 1) * (self.squares_y - 1)
