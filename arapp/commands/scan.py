@@ -139,7 +139,8 @@ def run(args) -> int:
     m = result.mesh
     ext = m.extents * 1000
     print(f"{out}: {len(m.faces)} triangles, watertight {m.is_watertight}, volume {m.volume * 1e6:.1f} cm^3, "
-          f"extent {ext[0]:.1f} x {ext[1]:.1f} x {ext[2]:.1f} mm ({'mm, print frame' if args.print_mm else 'm, world frame'}); "
+          f"extent {ext[0]:.1f} x {ext[1]:.1f} x {ext[2]:.1f} mm "
+          f"(file in {'millimetres, print frame' if args.print_mm else 'metres, world frame'}); "
           f"{len(result.views)} views of {result.frames_tracked} tracked frames")
     print("timings: " + ", ".join(f"{k} {v:.1f}" for k, v in result.timings.items()))
     if args.nurbs:
