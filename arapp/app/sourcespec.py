@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from arapp.camera_store import attach_camera
 from tracking import sources
 from tracking.errors import SourceError
 from tracking.sources import format_spec, parse_spec
@@ -50,8 +51,12 @@ def display_name(spec: str) -> str:
 
 
 def open_spec(spec: str):
-    """Open the source a spec names. Recordings are read as fast as asked (the player paces them itself)."""
-    return sources.open_source(spec, realtime=False, loop=False)
+    """Open the source a spec names, with a camera: its own, else one stored for it by the calibration
+    wizard, else an estimate from its size (arapp.camera_store.attach_camera; the GUI shows which).
+    Recordings are read as fast as asked (the player paces them itself)."""
+    source = sources.open_source(spec, realtime=False, loop=False)
+    attach_camera(source)
+    return source
 
 
 def list_devices() -> list[tuple[str, str]]:
