@@ -32,12 +32,14 @@ from pathlib import Path
 
 import numpy as np
 
+from arapp.app.commands import Step
 from arapp.app.headless import EventQueue, headless_engine_factory
 from arapp.app.printlink import SerialTarget
 from arapp.app.session import Session
 from arapp.placement import Placement
 from arapp.printing import SliceSettings
 from arapp.printing.bed_anchor import bed_from_anchor_measured, save_bed_anchor
+from arapp.printing.link.job import Program
 from virtual_printer import VirtualPrinterPty
 
 recording, model_path, out = sys.argv[2], sys.argv[3], Path(sys.argv[4])
@@ -64,7 +66,7 @@ session.edit_control_point(0, 1, 1, xyz, 3.0 * w0)
 report["weights"] = [w0, float(session.model.surfaces[0].weights[1, 1])]
 session.set_placement(Placement(24.0, (5.0, -3.0, 0.0), (0.0, 0.0, 30.0)))
 session.seek(10)
-session.send(__import__("arapp.app.commands", fromlist=["Step"]).Step(1))
+session.send(Step(1))
 gen = session.model_gen
 ok = events.wait_until(lambda: session.last_shown is not None and session.last_shown.result.index == 10
                        and session.last_shown.result.extra.get("model_gen") == gen
@@ -96,7 +98,6 @@ with VirtualPrinterPty(simulated_errors=[]) as vp:
     assert ps.start_print(SerialTarget(vp.port), str(profile)), errors
     assert finished.wait(240), "the print did not finish"
     executed = list(vp.executed)
-from arapp.printing.link.job import Program
 program = [c.text for c in Program.from_lines(ps.result.gcode.splitlines()).commands]
 report["printed_in_order"] = [c for c in executed if c in set(program)] == program
 report["printed"] = len(program)
