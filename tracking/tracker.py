@@ -159,6 +159,14 @@ class TrackerConfig:
     the anchors' filter with the measurement weighted `cover_weight`. 0 turns the check off."""
     cover_weight: float = 0.1
     """weight (0..1) of a partly covered marker's measurement in the anchors' filter."""
+    jump_px: float = 0.0
+    """pixels: on a steady camera (the markers predicted to move under smear_px / 2 since the last frame),
+    a lone marker with a corner this far from the motion model's prediction is checked against one
+    frame of optical flow; if the flow pose agrees with the prediction and not with the
+    corners (the marker jumped, the scene did not: a finger dragging a corner), the flow pose is used,
+    for at most `smear_hold_s`. 0 (the default) turns the check off: at 1 px it catches a one-frame
+    corner jump on a steady camera, but on a floor of identical tiles at 15 fps the flow pose agreed with
+    the prediction and overruled a correct marker; the margin check (`cover_fraction`) is what is on."""
     new_anchor_gate: float = 0.5
     """an anchor never seen before in the session is used only if its corners lie within this many of its
     own image sizes of where the current pose (motion model, map) puts them: a look-alike pattern must
@@ -216,6 +224,7 @@ class Tracker:
         self.smear_px, self.smear_sharpness = smear_px, smear_sharpness
         self.smear_gate_px, self.smear_hold_s = smear_gate_px, smear_hold_s
         self.flow_hold_s = flow_hold_s
+        self.jump_px = cfg.jump_px
         self.anchor_first = bool(anchor_first)
         self.keypoint_every = max(1, int(keypoint_every))
         self._kf_submissions: list[tuple[int, int]] = []   # (frame, mapper request number)
@@ -361,8 +370,9 @@ class Tracker:
             pose = self._anchor_output(ar) if self._anchor_usable(ar) else None
             if (pose is not None and self._frame - self._full_frame < self.keypoint_every
                     and self._plausible(pose, self.motion.last, t)):
-                got = self._follow_from_last(gray, t) if self._moving_fast(ar, t) else None
-                if self._smeared(ar, got, gray, t):
+                jumped = self._jumped(ar, t)
+                got = self._follow_from_last(gray, t) if self._moving_fast(ar, t) or jumped else None
+                if self._smeared(ar, got, gray, t) or (jumped and self._flow_disagrees(ar, got, t)):
                     return self._flow_result(got, t, t0, int(ar.markers))
                 self._flow = None   # flow restarts from the next full frame (or from this image)
                 return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, int(ar.markers),
@@ -387,7 +397,8 @@ class Tracker:
             else:
                 self._since_detect += 1
             usable = self._anchor_usable(ar) and self._plausible(self._anchor_output(ar), self.motion.last, t)
-            if got is not None and (not usable or self._smeared(ar, got, gray, t)):
+            if got is not None and (not usable or self._smeared(ar, got, gray, t)
+                                    or (self._jumped(ar, t) and self._flow_disagrees(ar, got, t))):
                 return self._flow_result(got, t, t0, int(ar.markers) if ar is not None else 0)
         self._full_frame = self._frame
         fut = self._pool.submit(self._anchors.process, gray, t, self._reference(t)) if detect else None
@@ -402,10 +413,12 @@ class Tracker:
         elif ar is None:
             self._since_detect += 1
         if (not flow_tried and self._anchor_usable(ar)
-                and self._plausible(self._anchor_output(ar), self.motion.last, t) and self._moving_fast(ar, t)):
-            got, flow_tried = self._follow_from_last(gray, t), True
-            if self._smeared(ar, got, gray, t):
-                return self._flow_result(got, t, t0, int(ar.markers))
+                and self._plausible(self._anchor_output(ar), self.motion.last, t)):
+            jumped = self._jumped(ar, t)
+            if jumped or self._moving_fast(ar, t):
+                got, flow_tried = self._follow_from_last(gray, t), True
+                if self._smeared(ar, got, gray, t) or (jumped and self._flow_disagrees(ar, got, t)):
+                    return self._flow_result(got, t, t0, int(ar.markers))
 
         corners_w, corners_uv, markers = self._anchor_points(ar)
         pred = self.motion.predict(t)
@@ -574,6 +587,40 @@ class Tracker:
         corners = np.asarray(ar.object_points, float).reshape(-1, 3)
         gap = float(np.median(np.linalg.norm(self.camera.project_world(corners, got[0]) - seen, axis=1)))
         return gap > self.smear_gate_px
+
+    def _jumped(self, ar, t) -> bool:
+        """Whether a corner of a lone marker (4 points: one wrong corner does not show in its reprojection
+        error, and 1 px on one corner tilts a 70-pixel marker's pose by centimetres at 45 cm) is more
+        than `jump_px` from where the motion model predicts it: a jump to be checked
+        against the image's own motion (optical flow) before it is shown."""
+        if self.jump_px <= 0 or not self.flow or self.motion.last is None or len(ar.object_points) > 4:
+            return False
+        corners = np.asarray(ar.object_points, float).reshape(-1, 3)
+        seen = np.asarray(ar.image_points, float).reshape(-1, 2)
+        pred = self.camera.project_world(corners, self.motion.predict(t))
+        # only on a steady camera: while it moves, a pixel is within what the prediction misses, and
+        # flow over repeated texture can lock onto a look-alike that agrees with the prediction
+        moved = np.linalg.norm(pred - self.camera.project_world(corners, self.motion.last), axis=1).max()
+        if moved > 0.5 * self.smear_px:
+            return False
+        return float(np.linalg.norm(pred - seen, axis=1).max()) > self.jump_px   # a dragged corner moves alone
+
+    def _flow_disagrees(self, ar, got, t) -> bool:
+        """Whether the flow pose `got` (the image's own motion since the last frame) puts a jumped lone
+        marker's corners more than `jump_px` from where they were detected while agreeing with the motion
+        model's prediction better than the marker does: the marker moved, the scene did not. Only within
+        `smear_hold_s` of the anchors' last accepted frame (after that they win again)."""
+        if got is None or self._anchor_t is None or t - self._anchor_t > self.smear_hold_s:
+            return False
+        corners = np.asarray(ar.object_points, float).reshape(-1, 3)
+        seen = np.asarray(ar.image_points, float).reshape(-1, 2)
+        flow_px = self.camera.project_world(corners, got[0])
+        pred_px = self.camera.project_world(corners, self.motion.predict(t))
+        to_seen = float(np.linalg.norm(flow_px - seen, axis=1).max())
+        to_pred = float(np.linalg.norm(flow_px - pred_px, axis=1).max())
+        # the flow must confirm the prediction to within a pixel: a flow pose that merely leans toward it
+        # (drifting over repeated texture) proves nothing against a marker
+        return to_seen > self.jump_px and to_pred < min(0.5 * to_seen, self.jump_px)
 
     def _moving_fast(self, ar, t) -> bool:
         """Whether the anchors may have moved more than smear_px in the image since the last frame, by the
