@@ -25,6 +25,13 @@ mapping thread (triangulation, culling, local bundle adjustment with anchor
 corners as constraints); `process` never waits for it. Offline drivers, which
 feed frames faster than a camera would, call `catch_up()` between frames so the
 map keeps the pace it would have live, whatever the machine's load.
+
+Anchor measurements that must not move the model: a lone marker whose white
+margin is partly covered (a hand reaching in, `anchors.occlusion`) is not shown
+as it is; the map, else flow, carries the pose, else the anchors' filter with
+the measurement weighted little. An anchor never seen before in the session
+that lands far from where the motion model puts the camera (a look-alike
+pattern) is left out while anything else holds the pose (`TrackerConfig`).
 """
 
 from __future__ import annotations
