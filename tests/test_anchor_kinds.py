@@ -123,6 +123,15 @@ def test_built_in_kinds_keep_their_words_and_blocks():
     np.testing.assert_allclose(T[:3, 2], [0, 0, -1])
 
 
+def test_a_taken_name_is_refused():
+    class Impostor(DominoKind):
+        name = "aruco"
+
+    with pytest.raises(ValueError, match="'aruco' is already registered by ArucoKind"):
+        register(Impostor())
+    assert type(KINDS["aruco"]).__name__ == "ArucoKind"
+
+
 def test_unknown_kind_names_the_registered_ones():
     with pytest.raises(SessionError, match=r"anchors\[0\]\.kind: must be one of aruco, aruco_board, charuco, qr"):
         parse_anchors([{"kind": "domino", "dictionary": DICT, "id": 1, "length": 0.05, "gap": 0.01}])

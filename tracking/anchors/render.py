@@ -19,14 +19,7 @@ from tracking.poses import invert
 from tracking.session import AnchorSpec
 
 # qr_modules lives with the QR kind (tracking/anchors/kinds/qr.py); named here too
-__all__ = ["qr_modules", "marker_bits", "plane_layout", "draw_anchor", "render_view", "look_at"]
-
-
-def marker_bits(dictionary_id: int, marker_id: int) -> np.ndarray:
-    """(n+2, n+2) uint8 image of an ArUco marker with its one-cell black border, one pixel per cell."""
-    d = cv2.aruco.getPredefinedDictionary(dictionary_id)
-    n = d.markerSize + 2
-    return cv2.aruco.generateImageMarker(d, int(marker_id), n, borderBits=1)
+__all__ = ["qr_modules", "plane_layout", "draw_anchor", "render_view", "look_at"]
 
 
 def plane_layout(model: AnchorModel, margin: float | None = None):

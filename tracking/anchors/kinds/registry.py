@@ -12,9 +12,14 @@ KINDS: dict = {}
 
 
 def register(kind):
-    """Add an `AnchorKind` instance to the table under `kind.name` (replacing one of the same name); returns it."""
+    """Add an `AnchorKind` instance to the table under `kind.name`; returns it. Registering the same class
+    again replaces it; another class under a taken name is refused (two kinds cannot share a name)."""
     if not getattr(kind, "name", ""):
         raise ValueError(f"{kind!r}: an anchor kind needs a name")
+    old = KINDS.get(kind.name)
+    if old is not None and type(old) is not type(kind):
+        raise ValueError(f"anchor kind {kind.name!r} is already registered by {type(old).__qualname__}; "
+                         f"choose another name")
     KINDS[kind.name] = kind
     return kind
 
