@@ -3,8 +3,9 @@
 `KINDS` maps the session.json `kind` string to an `AnchorKind` (base.py): its
 fields and checks, geometry, detector family, drawing and words. session.py,
 the detector, the renderer, printable sheets, placement, diagnosis and the
-user guidance all dispatch through it. A new kind is one module beside these
-and one line in the `register` calls below (docs/architecture.md shows one).
+user guidance all dispatch through it. A new kind is one module beside these,
+imported below, and one `register(...)` line (docs/architecture.md shows one);
+a kind defined elsewhere calls `register` itself before its sessions are read.
 """
 
 from tracking.anchors.defaults import DEFAULT_DICTIONARY
@@ -15,7 +16,6 @@ from tracking.anchors.kinds.charuco import CharucoKind
 from tracking.anchors.kinds.qr import QRKind
 from tracking.anchors.kinds.registry import KINDS, kind_named, kind_names, register
 from tracking.anchors.kinds.spec import AnchorSpec
-
 
 register(ArucoKind())
 register(ArucoBoardKind())
