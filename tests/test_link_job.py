@@ -136,7 +136,7 @@ def test_save_and_load_round_trip(tmp_path):
     ("y", 180.0 + BED_MARGIN_MM + 0.1, "bed"), ("z", -0.1, "bed"), ("z", 150.1, "bed"),
     ("hotend_target", 260.5, "260"), ("bed_target", 100.5, "100"), ("hotend_target", -1.0, "0 to"),
     ("next_line", -1, ">= 0"), ("next_line", 101, "source_lines"), ("next_line", 1.5, "whole"),
-    ("next_line", True, "whole"), ("layer", -2, ">= -1"), ("fan", 256, "0..255"), ("fan", -1, ">= 0"),
+    ("next_line", True, "whole"), ("layer", -2, ">= -1"), ("fan", 256, "0 to 255"), ("fan", -1, "0 to 255"),
     ("commands_done", 5, "commands_total"), ("gcode_sha256", "AB" * 32, "sha256"),
     ("gcode_sha256", "ab" * 31, "sha256"), ("status", "paused", "one of"), ("gcode", 3, "string"),
     ("f", 0.0, "positive"), ("absolute_e", 1, "true or false"),
@@ -154,6 +154,44 @@ def test_schema_refuses(key, value, words):
 ])
 def test_schema_accepts_the_limits(key, value):
     check_job_fields(fields(**{key: value}), "job.json", _Profile())
+
+
+def test_every_field_has_a_type():
+    """Each field of the file, given a value of no kind it may have (a list), is refused by name."""
+    from arapp.printing.link.job import job_schema
+
+    schema = job_schema(_Profile())
+    assert set(schema) == set(JobState.__dataclass_fields__)
+    for key in schema:
+        with pytest.raises(JobFileError, match=f"'{key}' must be"):
+            check_job_fields(fields(**{key: [1]}), "job.json", _Profile())
+    for key in ("e", "updated", "hotend_target"):
+        with pytest.raises(JobFileError, match="finite number"):
+            check_job_fields(fields(**{key: None}), "job.json", _Profile())
+    for key in ("hotend", "bed", "f"):
+        with pytest.raises(JobFileError, match="finite number or null"):
+            check_job_fields(fields(**{key: math.nan}), "job.json", _Profile())
+    for key in ("source_lines", "commands_total", "layer_count", "baud"):
+        with pytest.raises(JobFileError, match=f"'{key}' must be >= 0"):
+            check_job_fields(fields(**{key: -1}), "job.json", _Profile())
+    with pytest.raises(JobFileError, match="'gcode_sha256'"):
+        data = fields()
+        del data["gcode_sha256"]
+        check_job_fields(data, "job.json", _Profile())
+    check_job_fields({"gcode_sha256": SHA}, "job.json", _Profile())  # everything else has a default
+
+
+def test_schema_limits_come_from_the_profile():
+    class Tall(_Profile):
+        class bed:
+            width, depth, height = 400.0, 300.0, 500.0
+
+        max_hotend_temperature = 400.0
+        max_bed_temperature = 150.0
+
+    check_job_fields(fields(x=404.0, y=304.0, z=499.0, hotend_target=399.0, bed_target=149.0), "j", Tall())
+    with pytest.raises(JobFileError, match="'y' must be -5 to 185 mm"):
+        check_job_fields(fields(y=186.0), "j", _Profile())
 
 
 def test_schema_without_profile_uses_the_generic_printer():
@@ -213,3 +251,117 @@ def test_is_heating():
     assert is_heating("M104 S200") and is_heating("M190 R60") and is_heating("m109 s1")
     assert not is_heating("M104 S0") and not is_heating("M106 S255") and not is_heating("")
     assert not is_heating("M140")
+
+
+# -- pinned by mutation testing (docs/mutation-testing.md) ------------------------------------------
+def test_arcs_relative_axes_and_homing_each_axis():
+    s = run(JobState(), "G90", "G2 X5 Y6 I1 J0", "G3 X7 Y8 I1 J0")
+    assert (s.x, s.y) == (7.0, 8.0)
+    run(s, "G91", "G1 Y1 Z1")
+    assert (s.y, s.z) == (9.0, 1.0) and s.absolute_xyz is False and s.absolute_e is False
+    run(s, "G90", "G92 X1 Y2", "M83")
+    assert (s.x, s.y, s.absolute_e) == (1.0, 2.0, False)
+    for axis in "XYZ":
+        s2 = run(JobState(x=5.0, y=5.0, z=5.0), f"G28 {axis}")
+        assert getattr(s2, axis.lower()) == 0.0
+        assert sum(getattr(s2, a) == 0.0 for a in "xyz") == 1
+    s3 = run(JobState(x=5.0, y=5.0, z=5.0), "G28 X Y")
+    assert (s3.x, s3.y, s3.z) == (0.0, 0.0, 5.0)
+    s4 = run(JobState(), "M104 S190", "M140 S50", "M106")
+    assert (s4.hotend_target, s4.bed_target, s4.fan) == (190.0, 50.0, 255)
+
+
+def test_apply_sets_the_layer():
+    s = JobState()
+    s.apply(Command(4, "G1 X1", 3))
+    assert (s.layer, s.next_line) == (3, 5)
+
+
+def test_program_layer_comments_and_line_ends():
+    p = Program.from_lines(["G28\r\n", "M117 ;LAYER:5 in a message\n", ";LAYER:2\n", "G1 X1\n"])
+    assert [(c.text, c.layer) for c in p.commands] == [("G28", -1), ("M117", -1), ("G1 X1", 2)]
+    assert p.layer_count == 3
+    q = Program.from_lines(["G28", "G1 X1"])
+    assert q.layer_count == 0
+    import hashlib
+
+    assert Program.from_lines(["G28\r\n"]).sha256 == hashlib.sha256(b"G28\n").hexdigest()
+    assert Program.from_lines(["M117 é"]).sha256 == hashlib.sha256("M117 é\n".encode()).hexdigest()
+    for prefix in ("G", "M", "T"):
+        r = Program.from_lines([f"{prefix}1 ;LAYER:7", "G1 X1"])
+        assert r.layer_count == 0, prefix  # a command's comment is not a layer change
+
+
+def test_program_from_file(tmp_path):
+    path = tmp_path / "p.gcode"
+    path.write_text("G28\n;LAYER:0\nG1 X1\n")
+    p = Program.from_file(path)
+    assert [(c.text, c.layer) for c in p.commands] == [("G28", -1), ("G1 X1", 0)]
+
+
+def test_save_writes_readable_json_atomically(tmp_path):
+    path = tmp_path / "job.json"
+    JobState(gcode_sha256=SHA, message="Grüße").save(path)
+    text = path.read_text(encoding="utf-8")
+    assert text.endswith("}\n") and '\n  "gcode": ""' in text
+    assert [p.name for p in tmp_path.iterdir()] == ["job.json"]
+    assert JobState.load(path).message == "Grüße"
+
+
+def test_load_checks_with_the_given_profile_and_names_the_file(tmp_path):
+    path = tmp_path / "job.json"
+    JobState(gcode_sha256=SHA, x=190.0, y=10.0, z=1.0).save(path)
+    JobState.load(path)  # on the generic 250 mm bed
+    with pytest.raises(JobFileError, match=f"{path}: field 'x'"):
+        JobState.load(path, type("Small", (_Profile,), {"bed": type("B", (), {"width": 100.0, "depth": 100.0,
+                                                                                    "height": 100.0})})())
+    data = json.loads(path.read_text())
+    data["a"], data["b"] = 1, 2
+    path.write_text(json.dumps(data))
+    with pytest.raises(JobFileError, match="unknown key\\(s\\) a, b"):
+        JobState.load(path)
+
+
+def test_new_state_defaults():
+    p = Program.from_lines([";LAYER:0", "G1 X1", ";LAYER:1", "G1 X2"])
+    s = new_state(p)
+    assert (s.gcode, s.layer_count, s.commands_total, s.next_line, s.status) == ("", 2, 2, 0, "new")
+
+
+def test_messages_tell_what_to_do():
+    with pytest.raises(JobFileError, match="resume with the original file"):
+        JobState(gcode_sha256=SHA).check_program(Program.from_lines(["G28"]), "p.gcode")
+    with pytest.raises(JobFileError, match=r"\(no message\); fix the cause, then resume with --after-halt"):
+        check_resumable(JobState(status="halted"), "j")
+    with pytest.raises(JobFileError, match="stopped before the first move"):
+        resume_commands(JobState(x=1.0, z=1.0))
+    with pytest.raises(JobFileError):
+        resume_commands(JobState(y=1.0, z=1.0))
+
+
+def test_small_targets_and_lifts():
+    s = JobState(x=1.0, y=1.0, z=149.5, bed_target=0.5, hotend_target=0.5)
+    out = resume_commands(s, bed_height=150.0)
+    assert out[:2] == ["M190 S0.5", "M109 S0.5"] and out[4] == "G1 Z150.000 F600"
+    assert cancel_commands(JobState(z=149.5), bed_height=150.0)[4] == "G1 Z0.5 F600"
+    assert is_heating("M104 T0 S200")
+
+
+def test_make_link():
+    from arapp.printing.link.factory import OctoPrintTarget, SerialTarget, make_link
+    from arapp.printing.link.serial_link import SerialPrinter
+
+    link = make_link(SerialTarget("/dev/ttyUSB9", 250000, window=3, timeout=4.5), profile=_Profile(),
+                     job_path="j.json")
+    assert isinstance(link, SerialPrinter)
+    assert (link.port, link.baud, link.window, link.timeout, link.job_path, link.bed_height) == (
+        "/dev/ttyUSB9", 250000, 3, 4.5, "j.json", 150.0)
+    assert make_link(SerialTarget("loop://")).bed_height is None
+    with pytest.raises(ValueError, match="serial port"):
+        make_link(SerialTarget(""))
+    with pytest.raises(ValueError, match="OctoPrint URL"):
+        make_link(OctoPrintTarget("", "key.txt"))
+    with pytest.raises(ValueError, match="--api-key-file"):
+        make_link(OctoPrintTarget("http://octopi.local", ""))
+    with pytest.raises(TypeError, match="no printer link for a str; known: SerialTarget, OctoPrintTarget"):
+        make_link("/dev/ttyUSB0")

@@ -244,67 +244,85 @@ class JobState:
             )
 
 
-def _finite(value) -> bool:
+def job_schema(profile) -> dict:
+    """Each job-file field -> (kind, low, high, unit). Kinds: str, sha, status, bool, int (whole
+    number), num (finite number), opt (finite number or null). Positions within the profile's bed
+    (mm; x and y up to `BED_MARGIN_MM` outside it), heater targets up to its maxima (degrees C)."""
+    bed = profile.bed
+    hot = float(getattr(profile, "max_hotend_temperature", DEFAULT_MAX_HOTEND_C))
+    cold = float(getattr(profile, "max_bed_temperature", DEFAULT_MAX_BED_C))
+    on_bed = " mm (on the printer's bed)"
+    return {
+        "gcode": ("str", None, None, ""), "message": ("str", None, None, ""), "port": ("str", None, None, ""),
+        "gcode_sha256": ("sha", None, None, ""), "status": ("status", None, None, ""),
+        "source_lines": ("int", 0, None, ""), "next_line": ("int", 0, None, ""),
+        "commands_done": ("int", 0, None, ""), "commands_total": ("int", 0, None, ""),
+        "layer": ("int", -1, None, ""), "layer_count": ("int", 0, None, ""), "baud": ("int", 0, None, ""),
+        "fan": ("int", 0, 255, ""),
+        "x": ("opt", -BED_MARGIN_MM, bed.width + BED_MARGIN_MM, on_bed),
+        "y": ("opt", -BED_MARGIN_MM, bed.depth + BED_MARGIN_MM, on_bed),
+        "z": ("opt", 0.0, bed.height, on_bed),
+        "e": ("num", None, None, ""), "f": ("opt", None, None, ""), "updated": ("num", None, None, ""),
+        "hotend": ("opt", None, None, ""), "bed": ("opt", None, None, ""),
+        "hotend_target": ("num", 0.0, hot, " C (the printer profile's maximum)"),
+        "bed_target": ("num", 0.0, cold, " C (the printer profile's maximum)"),
+        "absolute_xyz": ("bool", None, None, ""), "absolute_e": ("bool", None, None, ""),
+    }
+
+
+_KIND_TEXT = {
+    "str": "must be a string", "sha": "must be the G-code's sha256 (64 hex digits)",
+    "status": f"must be one of {', '.join(sorted(STATUSES))}", "bool": "must be true or false",
+    "int": "must be a whole number", "num": "must be a finite number", "opt": "must be a finite number or null",
+}
+
+
+def _kind_ok(kind: str, value) -> bool:
+    if kind == "str":
+        return isinstance(value, str)
+    if kind == "sha":
+        return isinstance(value, str) and re.fullmatch(r"[0-9a-f]{64}", value) is not None
+    if kind == "status":
+        return isinstance(value, str) and value in STATUSES
+    if kind == "bool":
+        return isinstance(value, bool)
+    if kind == "int":
+        return isinstance(value, int) and not isinstance(value, bool)
+    if kind == "opt" and value is None:
+        return True
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def check_job_fields(data: dict, path, profile=None) -> None:
-    """Refuse a job file field of the wrong type or out of range (JobFileError, one line naming file
-    and field). Ranges: positions within the profile's bed (mm, `BED_MARGIN_MM` outside allowed),
-    heater targets from 0 to the profile's maxima (degrees C), counts and `next_line` >= 0; the
-    G-code's sha256 is required."""
+    """Refuse a job file field of the wrong type or out of range (`job_schema`): JobFileError, one
+    line naming the file and the field. The G-code's sha256 is required; `profile` None: the
+    generic printer's."""
     if profile is None:
         profile = load_profile(None)  # the generic printer, as every command assumes without --printer
 
     def bad(key, why):
         return JobFileError(f"{path}: field '{key}' {why} (got {data.get(key)!r}); fix or delete the job file")
 
-    bed = getattr(profile, "bed", None)
-    size = {"x": getattr(bed, "width", None), "y": getattr(bed, "depth", None), "z": getattr(bed, "height", None)}
-    max_temp = {
-        "hotend_target": float(getattr(profile, "max_hotend_temperature", DEFAULT_MAX_HOTEND_C)),
-        "bed_target": float(getattr(profile, "max_bed_temperature", DEFAULT_MAX_BED_C)),
-    }
-    sha = data.get("gcode_sha256")
-    if not isinstance(sha, str) or not re.fullmatch(r"[0-9a-f]{64}", sha):
-        raise bad("gcode_sha256", "must be the G-code's sha256 (64 hex digits)")
-    for key in ("gcode", "status", "message", "port"):
-        if key in data and not isinstance(data[key], str):
-            raise bad(key, "must be a string")
-    if data.get("status", "new") not in STATUSES:
-        raise bad("status", f"must be one of {', '.join(sorted(STATUSES))}")
-    for key, low in (("source_lines", 0), ("next_line", 0), ("commands_done", 0), ("commands_total", 0),
-                     ("layer", -1), ("layer_count", 0), ("baud", 0), ("fan", 0)):
-        if key in data and (not isinstance(data[key], int) or isinstance(data[key], bool) or data[key] < low):
-            raise bad(key, f"must be a whole number >= {low}")
-    if data.get("fan", 0) > 255:
-        raise bad("fan", "must be 0..255")
+    if "gcode_sha256" not in data:
+        raise bad("gcode_sha256", _KIND_TEXT["sha"])
+    for key, (kind, low, high, unit) in job_schema(profile).items():
+        if key not in data:
+            continue
+        value = data[key]
+        if not _kind_ok(kind, value):
+            raise bad(key, _KIND_TEXT[kind])
+        if value is None or low is None:
+            continue
+        if high is None and value < low:
+            raise bad(key, f"must be >= {low:g}")
+        if high is not None and not low <= value <= high:
+            raise bad(key, f"must be {low:g} to {high:g}{unit}")
+    if data.get("f") is not None and data["f"] <= 0:
+        raise bad("f", "must be a positive feed rate (mm/min)")
     if data.get("next_line", 0) > data.get("source_lines", 0):
         raise bad("next_line", "must not be past the G-code's last line (source_lines)")
     if data.get("commands_done", 0) > data.get("commands_total", 0):
         raise bad("commands_done", "must not exceed commands_total")
-    for key in ("x", "y", "z", "e", "f", "hotend", "bed", "hotend_target", "bed_target", "updated"):
-        value = data.get(key)
-        if value is None and key in ("x", "y", "z", "f", "hotend", "bed"):
-            continue
-        if key in data and not _finite(value):
-            raise bad(key, "must be a finite number")
-    for key in ("x", "y", "z"):
-        value = data.get(key)
-        if value is None:
-            continue
-        low = 0.0 if key == "z" else -BED_MARGIN_MM
-        high = size[key] + (0.0 if key == "z" else BED_MARGIN_MM) if size[key] is not None else None
-        if value < low or (high is not None and value > high):
-            raise bad(key, f"must lie on the bed ({low:g} to {high if high is not None else 'inf'} mm)")
-    if data.get("f") is not None and data["f"] <= 0:
-        raise bad("f", "must be a positive feed rate (mm/min)")
-    for key, high in max_temp.items():
-        if key in data and not 0.0 <= data[key] <= high:
-            raise bad(key, f"must be 0 to {high:g} C (the printer profile's maximum)")
-    for key in ("absolute_xyz", "absolute_e"):
-        if key in data and not isinstance(data[key], bool):
-            raise bad(key, "must be true or false")
 
 
 def check_resumable(state: JobState, path, *, after_halt: bool = False) -> None:
