@@ -25,6 +25,7 @@ from arapp.app import commands as cmd
 from arapp.app import recording
 from arapp.app.editing import display_placement, edited_model, model_mesh
 from arapp.app.events import Events
+from arapp.app.history import History
 from arapp.app.print_session import PrintSession
 from arapp.app.runner import ImmediateRunner
 from arapp.app.sourcespec import display_name
@@ -127,6 +128,7 @@ class Session:
         self.print_session: PrintSession | None = None
         self._drag = None  # (mode, grabbed paper point mm, placement at the grab, pose at the grab)
         self._edit = self.run.latest(retessellate, self._edit_done, self._edit_failed, name="arapp-edit")
+        self.history = History(self)  # undo / redo of control-point edits and placement
 
     # -- errors and messages -------------------------------------------------------------
     def report(self, title: str, message: str) -> None:
