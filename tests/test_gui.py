@@ -314,7 +314,7 @@ def test_missing_camera_gives_its_dialog(qtbot, window):
     assert title == "Cannot open source"
     assert message == str(expected.value)
     assert window.open_error_boxes()[0].text() == message
-    qtbot.waitUntil(lambda: not window.engine.running, timeout=5000)
+    qtbot.waitUntil(lambda: window.engine is None or not window.engine.running, timeout=5000)
 
 
 def test_shortcuts_and_settings(qtbot, window, recording, tmp_path):

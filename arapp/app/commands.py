@@ -198,6 +198,24 @@ class RecordStop:
 
 
 @dataclass(frozen=True)
+class ArRecordStart:
+    """Start writing the composited view (what is on screen, at the source's resolution) to the video `path`."""
+
+    path: str
+
+    def apply(self, engine) -> None:
+        engine.ar_record_start(self.path)
+
+
+@dataclass(frozen=True)
+class ArRecordStop:
+    """Finish the AR video; the engine's `recorded(path)` event follows once the file is closed."""
+
+    def apply(self, engine) -> None:
+        engine.ar_record_stop()
+
+
+@dataclass(frozen=True)
 class Stop:
     """End the engine: both threads finish, closing the source and the pipeline."""
 

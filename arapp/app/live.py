@@ -21,6 +21,7 @@ from typing import Any, Callable
 import numpy as np
 
 from arapp.app import recording
+from arapp.app.capture import ArVideoWriter
 from arapp.app.editing import edited_model, model_mesh
 from arapp.app.events import Events
 from arapp.app.player import ON_DEMAND, Player
@@ -63,6 +64,19 @@ def default_pipeline(source, info: SourceInfo) -> Pipeline:
     """The live view's pipeline: tracking and drawing, no status line (the app shows the state itself);
     the model arrives later as a command."""
     return Pipeline(info.camera, info.anchors, status_line=False)
+
+
+class TappedSlot(LatestSlot):
+    """A LatestSlot that also hands each item put into it to `tap` (the AR video writer), in the putting
+    thread, before the UI may drop it: the video keeps frames the screen skipped."""
+
+    tap: Callable[[Any], None] | None = None
+
+    def put(self, item) -> bool:
+        tap = self.tap
+        if tap is not None:
+            tap(item)
+        return super().put(item)
 
 
 class EngineFacade:
@@ -118,7 +132,8 @@ class LiveEngine:
         self.pipeline_factory = pipeline_factory
         self.wrap = wrap
         self.events = Events("opened", "ready", "error", "ended", "recorded", "toolpaths")
-        self.captured, self.shown = LatestSlot(), LatestSlot()
+        self.captured, self.shown = LatestSlot(), TappedSlot()
+        self.ar_video: ArVideoWriter | None = None
         self.stage = ProcessingStage(display_size)
         self.info: SourceInfo | None = None
         self.autoplay = playing
@@ -249,3 +264,32 @@ class LiveEngine:
             self.events.recorded.emit(str(rec.folder))
 
         threading.Thread(target=finish, name="arapp-record-close", daemon=True).start()
+
+    def ar_record_start(self, path: str) -> None:
+        """Record the composited view (camera + model as drawn) to the video file `path` (.mp4 or .avi)."""
+        if self.ar_video is not None:
+            return
+        try:
+            fps = self.info.fps if self.info is not None and self.info.fps > 0 else 30.0
+            self.ar_video = ArVideoWriter(path, fps)
+        except (ValueError, OSError) as exc:
+            self.events.error.emit("Cannot record the AR video", str(exc))
+            return
+        self.shown.tap = self.ar_video.write
+
+    def ar_record_stop(self) -> None:
+        """Finish the AR video in a thread of its own; `recorded(path)` follows."""
+        writer, self.ar_video = self.ar_video, None
+        self.shown.tap = None
+        if writer is None:
+            return
+
+        def finish():
+            try:
+                path = writer.close()
+            except Exception as exc:  # noqa: BLE001 - told to the user; the view goes on
+                self.events.error.emit("AR video failed", str(exc))
+                return
+            self.events.recorded.emit(str(path))
+
+        threading.Thread(target=finish, name="arapp-ar-video-close", daemon=True).start()

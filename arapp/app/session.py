@@ -25,7 +25,9 @@ from arapp.app import commands as cmd
 from arapp.app import recording
 from arapp.app.editing import display_placement, edited_model, model_mesh
 from arapp.app.events import Events
+from arapp.app.capture import VIDEO_CODECS, new_capture_path, save_screenshot
 from arapp.app.history import History
+from arapp.app.model_export import export_model
 from arapp.app.print_session import PrintSession
 from arapp.app.runner import ImmediateRunner
 from arapp.app.sourcespec import display_name
@@ -102,7 +104,8 @@ class Session:
         self.run = runner or ImmediateRunner()
         self.events = Events("source_opening", "source_opened", "frame", "ended", "error", "status", "recorded",
                              "model_loaded", "model_edited", "placement_changed", "mode_changed",
-                             "playing_changed", "toolpaths_shown", "recent_changed", "print_session")
+                             "playing_changed", "toolpaths_shown", "recent_changed", "print_session",
+                             "source_failed", "ar_recording_changed")
         self.engine = None
         self.old_engines: list = []
         self.source_spec: str | None = None
@@ -125,6 +128,7 @@ class Session:
         self.toolpaths_gen = 0
         self.toolpaths_info: dict | None = None  # what the engine drew
         self.recording_folder = None
+        self.ar_video_path: Path | None = None  # the AR video being recorded (arapp.app.capture)
         self.print_session: PrintSession | None = None
         self._drag = None  # (mode, grabbed paper point mm, placement at the grab, pose at the grab)
         self._edit = self.run.latest(retessellate, self._edit_done, self._edit_failed, name="arapp-edit")
@@ -188,7 +192,8 @@ class Session:
             # events of an engine closed meanwhile are dropped (errors still reach the user)
             return lambda *a: fn(*a) if self.engine is engine else None
 
-        handlers = EngineHandlers(opened=mine(self._opened), ready=mine(self._frame_ready), error=self.report,
+        handlers = EngineHandlers(opened=mine(self._opened), ready=mine(self._frame_ready),
+                                  error=lambda t, m: self._engine_error(engine, t, m),
                                   ended=mine(self._ended), recorded=self._recorded,
                                   toolpaths=mine(self._toolpaths_shown))
         engine = self.make_engine(spec, name=name, anchors=anchors, speed=self.speed, loop=self.loop,
@@ -204,7 +209,6 @@ class Session:
         if self.toolpaths_spec is not None:
             engine.send(cmd.ShowToolpaths(self.toolpaths_spec, self.toolpaths_gen))
         self.events.playing_changed.emit(True)
-        self.remember("recent_sources", spec)
 
     @staticmethod
     def classify_path(path: str) -> tuple[str, str]:
@@ -221,6 +225,7 @@ class Session:
 
     def close_source(self) -> None:
         if self.engine is not None:
+            self.stop_ar_recording()
             self.engine.stop()
             self.old_engines = [e for e in self.old_engines if e.running] + [self.engine]
             self.engine = None
@@ -231,6 +236,7 @@ class Session:
         if self.engine is not None:
             if self.recording_folder is not None:
                 self.stop_recording()
+            self.stop_ar_recording()
             self.engine.stop(wait=wait)
         for e in self.old_engines:
             e.stop(wait=wait / 2)
@@ -241,8 +247,22 @@ class Session:
 
     def _opened(self, info) -> None:
         self.source_info = info
+        if self.source_spec:
+            self.remember("recent_sources", self.source_spec)  # only sources that opened go into Recent
         self.events.source_opened.emit(info)
         self.events.playing_changed.emit(self.playing)
+
+    def _engine_error(self, engine, title: str, message: str) -> None:
+        """An engine's error reaches the user; when the open source fails before it opened, the session
+        goes back to having no source (source_failed(name) tells the GUI to reset its widgets)."""
+        self.report(title, message)
+        if engine is not None and engine is self.engine and self.source_info is None:
+            name = display_name(self.source_spec) if self.source_spec else ""
+            self.close_source()
+            self.source_spec = None
+            self.last_shown = None
+            self.events.playing_changed.emit(False)
+            self.events.source_failed.emit(name)
 
     def _frame_ready(self) -> None:
         shown = self.engine.take() if self.engine is not None else None
@@ -317,9 +337,61 @@ class Session:
         self.send(cmd.RecordStop())
 
     def _recorded(self, folder: str) -> None:
+        if Path(folder).suffix.lower() in VIDEO_CODECS:  # the AR video: a file to watch, not a source
+            self.status(f"Saved the AR video {folder}", 8000)
+            self.events.recorded.emit(folder)
+            return
         self.status(f"Saved the recording {folder}", 8000)
         self.remember("recent_sources", folder)
         self.events.recorded.emit(folder)
+
+    # -- screenshot and AR video ----------------------------------------------------------
+    def save_screenshot(self, path=None) -> Path | None:
+        """Save the composited view (model over the camera) as an image; default captures/screenshot-*.png.
+        None (reported) when nothing is shown or the file cannot be written."""
+        try:
+            saved = save_screenshot(self.last_shown, path if path is not None else new_capture_path("screenshot", ".png"))
+        except ValueError as exc:
+            self.report("Cannot save the screenshot", str(exc))
+            return None
+        self.status(f"Saved the screenshot {saved}", 8000)
+        return saved
+
+    @property
+    def can_record_ar(self) -> bool:
+        return self.engine is not None and self.source_info is not None
+
+    def start_ar_recording(self, path=None) -> Path | None:
+        """Record what is on screen (camera + model) to a video (.mp4 or .avi; default captures/ar-*.mp4)."""
+        if not self.can_record_ar or self.ar_video_path is not None:
+            return None
+        path = Path(path) if path is not None else new_capture_path("ar", ".mp4")
+        self.ar_video_path = path
+        self.send(cmd.ArRecordStart(str(path)))
+        self.status(f"Recording the AR view to {path}", 5000)
+        self.events.ar_recording_changed.emit(True)
+        return path
+
+    def stop_ar_recording(self) -> None:
+        if self.ar_video_path is None:
+            return
+        self.ar_video_path = None
+        self.send(cmd.ArRecordStop())
+        self.events.ar_recording_changed.emit(False)
+
+    def export_model(self, path) -> Path | None:
+        """Write the edited model as placed (STL/3MF/OBJ/PLY/GLB, mm) or as NURBS JSON (model units);
+        None (reported) on failure."""
+        if self.model is None:
+            self.report("Nothing to export", "Open a model first (Model panel or File > Open model)")
+            return None
+        try:
+            saved = export_model(self.model, self.placement, path)
+        except (ValueError, OSError) as exc:
+            self.report("Cannot export the model", str(exc))
+            return None
+        self.status(f"Exported {saved}", 8000)
+        return saved
 
     # -- models ----------------------------------------------------------------------------
     def open_model(self, path: str) -> None:

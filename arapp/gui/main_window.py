@@ -22,6 +22,7 @@ from arapp.app.editing import library_thumbnails
 from arapp.app.paint_stats import PaintStats
 from arapp.app.session import Session, as_bool
 from arapp.gui.errors import ErrorBoxes
+from arapp.gui.habits import install_habits
 from arapp.gui.menus import build_menus, update_recent_menus
 from arapp.gui.panels.model import MODEL_FILTER, ModelPanel, library_files
 from arapp.gui.panels.replay import ReplayBar
@@ -70,6 +71,7 @@ class MainWindow(QMainWindow):
         self._status_timer.setInterval(250)
         self._status_timer.timeout.connect(self._refresh_status)
         self._status_timer.start()
+        install_habits(self)  # undo/redo, export, screenshot, AR video, title, controls enabled when they can act
         QTimer.singleShot(0, self._start_thumbnails)
         QTimer.singleShot(0, self.freeze_heap)
 

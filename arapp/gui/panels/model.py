@@ -78,13 +78,13 @@ class ModelPanel(QWidget):
         lay.setContentsMargins(4, 4, 4, 4)
 
         self.library = QListWidget()
-        self.library.setViewMode(QListView.ViewMode.IconMode)
-        self.library.setIconSize(QSize(THUMB, THUMB))
-        self.library.setGridSize(QSize(THUMB + 28, THUMB + 30))
+        # a list, thumbnail left and the whole name right: an icon grid cut long names off
+        self.library.setViewMode(QListView.ViewMode.ListMode)
+        self.library.setIconSize(QSize(THUMB // 2, THUMB // 2))
         self.library.setResizeMode(QListView.ResizeMode.Adjust)
         self.library.setMovement(QListView.Movement.Static)
         self.library.setWordWrap(True)
-        self.library.setMinimumHeight(2 * (THUMB + 30) + 8)
+        self.library.setMinimumHeight(3 * (THUMB // 2 + 6) + 8)
         self.library.itemActivated.connect(self._activated)
         self.library.itemClicked.connect(self._activated)
         lay.addWidget(QLabel("Library (models/)"))
@@ -102,6 +102,7 @@ class ModelPanel(QWidget):
         lay.addWidget(self.current)
 
         place = QGroupBox("Placement on the anchor")
+        self.place_box = place
         pf = QFormLayout(place)
         self.size = _spin(1.0, 1000.0, 5.0, 1, " mm")
         self.offset = [_spin(-1000.0, 1000.0, 1.0, 1, " mm") for _ in range(3)]
@@ -137,7 +138,8 @@ class ModelPanel(QWidget):
         pos_row = QHBoxLayout()
         for s in self.position:
             pos_row.addWidget(s)
-        ef.addRow("Position", pos_row)
+        self.position_label = QLabel("Position")
+        ef.addRow(self.position_label, pos_row)
         for s in (self.weight, *self.position):
             s.valueChanged.connect(self._point_edited)
         self.edit_box = edit
@@ -147,6 +149,24 @@ class ModelPanel(QWidget):
         self._surfaces = []
         self._tilt = (0.0, 0.0)
         self.set_placement(Placement())
+        self.set_model_loaded(False)
+
+    def set_model_loaded(self, loaded: bool) -> None:
+        """Placement and Print act only on a loaded model."""
+        self.place_box.setEnabled(loaded)
+        self.print_button.setEnabled(loaded)
+
+    def mark_loaded(self, path: str | None) -> None:
+        """Highlight the library entry of the loaded model (bold, selected); the others plain."""
+        for i in range(self.library.count()):
+            item = self.library.item(i)
+            mine = path is not None and Path(item.data(Qt.ItemDataRole.UserRole)).resolve() == Path(path).resolve()
+            font = item.font()
+            font.setBold(mine)
+            item.setFont(font)
+            item.setSelected(mine)
+            if mine:
+                self.library.setCurrentItem(item)
 
     # -- library -----------------------------------------------------------------------
     def set_library(self, paths: list[Path]) -> None:
@@ -155,7 +175,6 @@ class ModelPanel(QWidget):
             item = QListWidgetItem(p.stem)
             item.setData(Qt.ItemDataRole.UserRole, str(p))
             item.setToolTip(str(p))
-            item.setSizeHint(QSize(THUMB + 24, THUMB + 28))
             self.library.addItem(item)
 
     def set_thumbnail(self, path: str, bgr) -> None:
@@ -178,6 +197,13 @@ class ModelPanel(QWidget):
         self.current.setText(f"<b>{name}</b> &nbsp; {Path(path).name}" + (
             f", {len(surfaces)} NURBS surface{'s' if len(surfaces) != 1 else ''}" if surfaces else ", mesh"))
         self.set_placement(placement)
+        # control points are in the model file's own unit (placement is in mm)
+        units = str(getattr(model, "units", "") or "model units")
+        self.position_label.setText(f"Position ({units})")
+        for box in self.position:
+            box.setSuffix(f" {units}")
+        self.set_model_loaded(True)
+        self.mark_loaded(path)
         self._surfaces = surfaces
         self.edit_box.setEnabled(bool(surfaces))
         self._quiet = True
@@ -189,6 +215,7 @@ class ModelPanel(QWidget):
     def set_surfaces(self, surfaces: list) -> None:
         """The edited surfaces (same shapes), so the fields show the values in force."""
         self._surfaces = list(surfaces)
+        self._selection_changed()  # undo / redo: the fields show the restored point
 
     def set_placement(self, p: Placement) -> None:
         """Show a placement (size_mm, offset mm, rotation_deg: the turn about z is edited here)."""

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (
@@ -52,11 +53,12 @@ class TrackingPanel(QWidget):
         self.dropped = QLabel("-")
         form.addRow("State", self.state)
         form.addRow("Anchors seen", self.markers)
-        form.addRow("Inliers", self.inliers)
+        form.addRow("Map points matched", self.inliers)
         form.addRow("Frame rate", self.fps)
         form.addRow("Latency", self.latency)
-        form.addRow("Track / render", self.timing)
-        form.addRow("Dropped", self.dropped)
+        form.addRow("Time per frame", self.timing)
+        form.addRow("Frames skipped", self.dropped)
+        self._dropped_marks: list[tuple[float, int]] = []  # (monotonic s, cumulative skipped) for a recent rate
         lay.addLayout(form)
         self.reset_button = QPushButton("Reset tracking (R)")
         self.reset_button.clicked.connect(self.reset_requested)
@@ -94,8 +96,21 @@ class TrackingPanel(QWidget):
         self.inliers.setText(str(result.inliers))
         self.fps.setText(f"{fps:.1f} fps")
         self.latency.setText(f"{latency_ms:.0f} ms (capture to paint)")
-        self.timing.setText(f"{result.ms_track:.1f} / {result.ms_render:.1f} ms")
-        self.dropped.setText(str(dropped))
+        self.timing.setText(f"tracking {result.ms_track:.1f} ms, drawing {result.ms_render:.1f} ms")
+        self.dropped.setText(skipped_text(self._dropped_marks, dropped, time.monotonic()))
+
+
+SKIP_WINDOW_S = 10.0
+
+
+def skipped_text(marks: list, cumulative: int, now: float) -> str:
+    """'2 in the last 10 s' from the running total of frames skipped (kept in `marks`, trimmed here): the
+    recent count says whether the machine keeps up now, which a total since opening does not."""
+    marks.append((now, int(cumulative)))
+    while len(marks) > 1 and marks[0][0] < now - SKIP_WINDOW_S:
+        marks.pop(0)
+    recent = max(0, int(cumulative) - marks[0][1])
+    return f"{recent} in the last {SKIP_WINDOW_S:.0f} s" if recent else "none lately"
 
 
 class AnchorsDialog(QDialog):

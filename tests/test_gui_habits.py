@@ -1,0 +1,297 @@
+"""Saving and habits in the desktop app (pytest-qt, offscreen): undo/redo, export, screenshot, AR video,
+controls enabled only when they can act, a failed source, the window title, plain words.
+
+Oracles: the model file (control points read from its JSON), trimesh reading the
+exported files back against the model's own vertices mapped by its placement
+rule, OpenCV reading the screenshot and the video, the recording's true camera
+poses with cv2.projectPoints of the placed model's bounding box (where the AR
+video must differ from the raw frames, and where it must not).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+import trimesh
+
+from PySide6.QtCore import QSettings, Qt  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+MODELS = ROOT / "models"
+ANCHORS = [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0, "length": 0.08}]
+N_FRAMES = 24
+TIMEOUT_MS = 30000
+
+
+def camera_poses(n: int) -> list[np.ndarray]:
+    """A slow arc around the marker at ~0.35 m, looking at its centre (world_from_camera)."""
+    from tracking.anchors.render import look_at
+
+    return [look_at([0.22 * np.cos(a), 0.22 * np.sin(a), 0.28], [0.0, 0.0, 0.0])
+            for a in (0.3 + 0.5 * i / (n - 1) for i in range(n))]
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:
+    from tracking.anchors.render import render_view
+    from tracking.camera import Camera
+    from tracking.recorder import RecordingWriter
+    from tracking.session import parse_anchors
+
+    folder = tmp_path_factory.mktemp("habits") / "arc"
+    cam = Camera(np.array([[560.0, 0, 322.5], [0, 560.0, 236.5], [0, 0, 1]]), np.zeros(5), 640, 480)
+    anchors = parse_anchors(ANCHORS)
+    with RecordingWriter(folder, cam, 30.0, anchors=ANCHORS, source={"kind": "synthetic"}) as w:
+        for i, pose in enumerate(camera_poses(N_FRAMES)):
+            w.write(render_view(anchors, cam, pose, bgr=True), i / 30.0, pose)
+    return folder
+
+
+@pytest.fixture
+def window(qtbot, tmp_path, monkeypatch):
+    from arapp.gui.main_window import MainWindow
+
+    monkeypatch.chdir(tmp_path)  # default captures/ and recordings/ land here
+    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+    w = MainWindow(settings=settings)
+    w.full_frames = True
+    w.error_sink = lambda title, message: None  # errors are checked in w.errors, no boxes
+    qtbot.addWidget(w)
+    w.show()
+    yield w
+    w.close()
+
+
+def load(qtbot, w, name: str) -> None:
+    w.open_model(str(MODELS / name))
+    qtbot.waitUntil(lambda: w.model is not None and Path(w.model_path).name == name, timeout=TIMEOUT_MS)
+
+
+def file_point(name: str, i: int, j: int) -> np.ndarray:
+    data = json.loads((MODELS / name).read_text())
+    return np.array(data["surfaces"][0]["control_points"][i][j], float)
+
+
+def placed_bounds_mm(model, placement) -> np.ndarray:
+    """The model's own tessellated vertices mapped by its placement rule (largest extent = size_mm)."""
+    import copy
+
+    m = copy.copy(model)
+    m.placement = placement
+    v = np.asarray(model.mesh().vertices, float)
+    M = m.placement_matrix("mm")
+    v = v @ M[:3, :3].T + M[:3, 3]
+    return np.array([v.min(axis=0), v.max(axis=0)])
+
+
+# -- controls that cannot act, a failed source --------------------------------------------------------
+def test_controls_disabled_with_nothing_loaded_and_p_opens_no_error(qtbot, window):
+    w = window
+    assert not w.replay.play_button.isEnabled()
+    assert not w.replay.record_button.isEnabled()
+    assert not w.play_action.isEnabled() and not w.reset_action.isEnabled()
+    assert not w.tracking_panel.reset_button.isEnabled()
+    assert not w.print_action.isEnabled() and not w.model_panel.print_button.isEnabled()
+    assert not w.model_panel.size.isEnabled() and not w.model_panel.offset[0].isEnabled()
+    h = w.habits
+    assert not h.undo_action.isEnabled() and not h.export_action.isEnabled()
+    assert not h.screenshot_action.isEnabled() and not h.record_ar_action.isEnabled()
+    qtbot.keyClick(w, Qt.Key.Key_P)
+    qtbot.wait(100)
+    assert w.errors == [] and w._print_dialog is None
+    load(qtbot, w, "sphere.json")
+    assert w.print_action.isEnabled() and w.model_panel.size.isEnabled() and h.export_action.isEnabled()
+    assert not w.replay.play_button.isEnabled()  # still no source
+
+
+def test_failed_source_resets_and_stays_out_of_recent(qtbot, window, tmp_path, recording):
+    w = window
+    bad = str(tmp_path / "no-such-recording")
+    w.open_source(bad)
+    qtbot.waitUntil(lambda: len(w.errors) > 0, timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: w.engine is None, timeout=5000)
+    assert "Opening" not in w.view.message and "opening" not in w.status_source.text()
+    assert w.replay.play_button.text() == "Play" and not w.replay.play_button.isEnabled()
+    assert bad not in w.session.recent("recent_sources")
+    assert "no-such-recording" not in w.windowTitle()
+    w.open_source(str(recording))  # a source that opens goes into Recent
+    qtbot.waitUntil(lambda: w.source_info is not None, timeout=TIMEOUT_MS)
+    assert w.session.recent("recent_sources") == [str(recording)]
+    assert w.replay.play_button.isEnabled()
+
+
+# -- undo / redo ----------------------------------------------------------------------------------------
+def test_undo_redo_placement_and_control_point_by_keyboard(qtbot, window):
+    w = window
+    load(qtbot, w, "rational_5x5.json")
+    p0 = w.placement
+    w.model_panel.size.setValue(80.0)
+    assert w.placement.size_mm == 80.0
+    xyz0 = file_point("rational_5x5.json", 0, 0)
+    w.model_panel.position[2].setValue(float(xyz0[2]) + 2.0)
+    qtbot.waitUntil(lambda: np.isclose(w.model.surfaces[0].control_points[0, 0][2], xyz0[2] + 2.0), timeout=TIMEOUT_MS)
+    qtbot.keyClick(w, Qt.Key.Key_Z, Qt.KeyboardModifier.ControlModifier)
+    qtbot.waitUntil(lambda: np.allclose(w.model.surfaces[0].control_points[0, 0], xyz0), timeout=TIMEOUT_MS)
+    assert w.model_panel.position[2].value() == pytest.approx(xyz0[2])  # the field shows the restored point
+    assert w.placement.size_mm == 80.0
+    qtbot.keyClick(w, Qt.Key.Key_Z, Qt.KeyboardModifier.ControlModifier)
+    assert w.placement == p0 and w.model_panel.size.value() == pytest.approx(p0.size_mm)
+    assert not w.habits.undo_action.isEnabled() and w.habits.redo_action.isEnabled()
+    qtbot.keyClick(w, Qt.Key.Key_Z, Qt.KeyboardModifier.ControlModifier | Qt.KeyboardModifier.ShiftModifier)
+    assert w.placement.size_mm == 80.0
+    qtbot.keyClick(w, Qt.Key.Key_Z, Qt.KeyboardModifier.ControlModifier | Qt.KeyboardModifier.ShiftModifier)
+    qtbot.waitUntil(lambda: np.isclose(w.model.surfaces[0].control_points[0, 0][2], xyz0[2] + 2.0), timeout=TIMEOUT_MS)
+
+
+# -- export ---------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("suffix", [".stl", ".3mf", ".obj"])
+def test_export_mesh_has_the_placed_models_size(qtbot, window, tmp_path, suffix):
+    w = window
+    load(qtbot, w, "rational_5x5.json")
+    w.model_panel.size.setValue(60.0)
+    xyz0 = file_point("rational_5x5.json", 2, 2)
+    w.model_panel.u_index.setValue(2)
+    w.model_panel.v_index.setValue(2)
+    w.model_panel.position[2].setValue(float(xyz0[2]) + 1.5)
+    qtbot.waitUntil(lambda: (0, 2, 2) in w.edits and w.session.model is not w.session.base_model, timeout=TIMEOUT_MS)
+    qtbot.wait(200)
+    target = tmp_path / f"out{suffix}"
+    w.habits.ask_path = lambda *a: str(target)
+    w.habits.export_action.trigger()
+    assert w.errors == [] and target.is_file()
+    mesh = trimesh.load(target, force="mesh")
+    got = mesh.bounds
+    want = placed_bounds_mm(w.model, w.placement)
+    # the open surface is closed with a 2 mm wall: each side grows by up to the wall
+    assert np.all(np.abs(got - want) <= 2.5), (got, want)
+    assert max(mesh.extents) == pytest.approx(60.0, abs=4.0)
+
+
+def test_export_json_keeps_the_edits(qtbot, window, tmp_path):
+    from arapp.geometry import load_model
+
+    w = window
+    load(qtbot, w, "rational_5x5.json")
+    xyz0 = file_point("rational_5x5.json", 0, 0)
+    w.model_panel.position[0].setValue(float(xyz0[0]) - 0.75)
+    qtbot.waitUntil(lambda: np.isclose(w.model.surfaces[0].control_points[0, 0][0], xyz0[0] - 0.75), timeout=TIMEOUT_MS)
+    target = tmp_path / "edited.json"
+    w.habits.ask_path = lambda *a: str(target)
+    w.habits.export_action.trigger()
+    back = load_model(target)
+    assert back.units == "cm" and back.name == "Rational 5x5 net"
+    assert np.allclose(back.surfaces[0].control_points[0, 0], xyz0 + [-0.75, 0, 0])
+    original = load_model(MODELS / "rational_5x5.json")
+    assert np.allclose(back.surfaces[0].control_points[1:], original.surfaces[0].control_points[1:])
+
+
+# -- screenshot, AR video, title, words -------------------------------------------------------------------
+def overlay_px(image: np.ndarray, raw: np.ndarray) -> np.ndarray:
+    return np.abs(image.astype(np.int16) - raw.astype(np.int16)).max(axis=2) > 40
+
+
+def test_screenshot_is_the_composited_view(qtbot, window, recording, tmp_path):
+    w = window
+    w.engine_kind = "threads"
+    load(qtbot, w, "sphere.json")
+    w.open_source(str(recording))
+    qtbot.waitUntil(lambda: w.last_shown is not None and w.last_shown.result.world_from_camera is not None
+                    and overlay_px(w.last_shown.result.image, w.last_shown.frame).sum() > 500, timeout=TIMEOUT_MS)
+    w.session.pause()
+    qtbot.wait(300)
+    shown = w.last_shown
+    target = tmp_path / "shot.png"
+    w.habits.ask_path = lambda *a: str(target)
+    assert w.habits.screenshot_action.isEnabled()
+    w.habits.screenshot_action.trigger()
+    image = cv2.imread(str(target))
+    assert image is not None and image.shape == shown.frame.shape
+    assert overlay_px(image, shown.frame).sum() > 500  # the model is in it, not only the camera
+    assert np.array_equal(image, shown.result.image)
+
+
+def projected_box_mask(model, anchor, camera, world_from_camera, shape) -> np.ndarray:
+    """The convex hull of the placed model's bounding box corners, projected with cv2.projectPoints."""
+    from arapp.placement import world_from_model
+    from tracking.poses import invert
+
+    lo, hi = np.asarray(model.bounds()[0], float), np.asarray(model.bounds()[1], float)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    cfm = invert(world_from_camera) @ world_from_model(anchor, model)
+    pts, _ = cv2.projectPoints(corners @ cfm[:3, :3].T + cfm[:3, 3], np.zeros(3), np.zeros(3), camera.K, camera.dist)
+    mask = np.zeros(shape[:2], np.uint8)
+    cv2.fillConvexPoly(mask, cv2.convexHull(pts.reshape(-1, 2).astype(np.int32)), 1)
+    return mask.astype(bool)
+
+
+def test_ar_video_has_the_model_drawn(qtbot, window, recording, tmp_path):
+    from tracking.sources import open_source
+
+    w = window  # the shipped child-process engine: the video is written there
+    load(qtbot, w, "sphere.json")
+    w.replay.loop.setChecked(True)
+    w.open_source(str(recording))
+    qtbot.waitUntil(lambda: w.source_info is not None and w.habits.record_ar_action.isEnabled(), timeout=TIMEOUT_MS)
+    target = tmp_path / "ar.mp4"
+    w.habits.ask_path = lambda *a: str(target)
+    w.habits.record_ar_action.trigger()
+    assert w.session.ar_video_path == target and "recording AR video" in w.windowTitle()
+    start = w.frames_painted
+    qtbot.waitUntil(lambda: w.frames_painted >= start + 30, timeout=TIMEOUT_MS)
+    done = []
+    w.session.events.recorded.connect(done.append)
+    w.habits.record_ar_action.trigger()
+    qtbot.waitUntil(lambda: bool(done), timeout=TIMEOUT_MS)
+    assert done == [str(target)] and str(target) not in w.session.recent("recent_sources")
+
+    src = open_source(str(recording))
+    raws = [f.image.copy() for f in src]
+    src.close()
+    info, model = w.source_info, w.model
+    cap = cv2.VideoCapture(str(target))
+    frames = []
+    while True:
+        ok, image = cap.read()
+        if not ok:
+            break
+        frames.append(image)
+    cap.release()
+    assert len(frames) >= 10
+    poses = camera_poses(N_FRAMES)
+    checked = 0
+    for image in frames[:: max(1, len(frames) // 12)]:
+        assert image.shape == raws[0].shape
+        # which recorded frame it is: the raw frame it matches best (the overlay covers a small part)
+        k = int(np.argmin([np.abs(image.astype(np.int16) - r.astype(np.int16)).mean() for r in raws]))
+        box = projected_box_mask(model, info.anchors[0], info.camera, poses[k], image.shape)
+        drawn = overlay_px(image, raws[k])
+        assert box.sum() > 1000
+        assert drawn[box].mean() > 0.3  # the model is drawn inside its projected box ...
+        assert drawn[~cv2.dilate(box.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool)].mean() < 0.01  # and only there
+        checked += 1
+    assert checked >= 5
+
+
+def test_title_units_and_plain_words(qtbot, window, recording):
+    w = window
+    assert w.windowTitle() == "arapp"
+    load(qtbot, w, "rational_5x5.json")
+    assert "Rational 5x5 net" in w.windowTitle() and "DOMAIN" not in w.windowTitle()
+    assert w.model_panel.position[0].suffix().strip() == "cm"  # this model's control points are in cm
+    assert w.model_panel.size.suffix().strip() == "mm"
+    item = next(w.model_panel.library.item(i) for i in range(w.model_panel.library.count())
+                if w.model_panel.library.item(i).text() == "rational_5x5")
+    assert item.isSelected() and item.font().bold()
+    w.model_panel.size.setValue(70.0)
+    assert "(edited)" not in w.windowTitle()
+    w.open_source(str(recording))
+    qtbot.waitUntil(lambda: w.source_info is not None, timeout=TIMEOUT_MS)
+    assert w.windowTitle().startswith(w.source_info.name)
+    from PySide6.QtWidgets import QLabel
+
+    words = " ".join(lbl.text() for lbl in w.tracking_panel.findChildren(QLabel))
+    assert "Inliers" not in words and "Track / render" not in words
