@@ -102,9 +102,13 @@ class FirstHour:
             track.addAction("Calibrate camera...", self.calibrate)
         file_menu = self._menu("File")
         if file_menu is not None:
-            quit_action = file_menu.actions()[-1]
-            file_menu.insertAction(quit_action, self._action("Printer set-up...", self.printer_setup))
-            file_menu.insertSeparator(quit_action)
+            setup = self._action("Printer set-up...", self.printer_setup)
+            quit_action = next((a for a in file_menu.actions() if a.text().replace("&", "") == "Quit"), None)
+            if quit_action is None:
+                file_menu.addAction(setup)
+            else:
+                file_menu.insertAction(quit_action, setup)
+                file_menu.insertSeparator(quit_action)
         add_help_menu(self.w, extra=[("Getting started", lambda: self.show_welcome(True))])
 
     def _action(self, text, slot):
