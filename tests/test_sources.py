@@ -364,11 +364,14 @@ def test_depthai_source_reads_the_device_calibration(monkeypatch):
         def readCalibration(self):
             return Calib()
 
+        def getConnectedCameras(self):
+            return ["CAM_A"]  # an OAK-1: no stereo pair, so colour only
+
         def close(self):
             calls.append("close")
 
     dai = types.SimpleNamespace(Device=Device, Pipeline=Pipeline, node=types.SimpleNamespace(Camera=CameraNode),
-                                CameraBoardSocket=types.SimpleNamespace(CAM_A="CAM_A"),
+                                CameraBoardSocket=types.SimpleNamespace(CAM_A="CAM_A", CAM_B="CAM_B", CAM_C="CAM_C"),
                                 ImgFrame=types.SimpleNamespace(Type=types.SimpleNamespace(BGR888i="BGR888i")))
     monkeypatch.setitem(sys.modules, "depthai", dai)
     with pytest.raises(SourceError, match="no DepthAI device 'CCC'; attached: AAA, BBB"):

@@ -1,8 +1,10 @@
 """Writing recordings (`arapp-recording/1`, docs/recording-format.md) and recording from a source.
 
 `RecordingWriter` writes the video (intra-frame MJPG in an .avi by default,
-or lossless FFV1 in .mkv), `frames.csv` with the real timestamps, and
-`session.json`; `record()` drives it from any source with a progress line.
+or lossless FFV1 in .mkv), `frames.csv` with the real timestamps,
+`session.json` and, for frames that carry depth, the depth stream (`depth/`,
+16-bit PNG in millimetres, tracking.depth_stream); `record()` drives it from
+any source with a progress line.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from tracking import depth_stream
 from tracking.camera import Camera
 from tracking.errors import SourceError
 from tracking.poses import write_tum
@@ -44,6 +47,10 @@ def prepare_folder(folder: str | Path, force: bool = False) -> Path:
             (folder / name).unlink(missing_ok=True)
         for p in folder.glob("video.*"):
             p.unlink()
+        depth_dir = folder / depth_stream.FOLDER
+        if depth_dir.is_dir():
+            for p in depth_dir.glob("*.png"):
+                p.unlink()
     folder.mkdir(parents=True, exist_ok=True)
     return folder
 
@@ -54,7 +61,9 @@ class RecordingWriter:
     `write(image, t)`: BGR uint8 frame of the camera's size, t in seconds (any
     origin; frames.csv stores t minus the first frame's t). `close()` finishes
     the video and writes frames.csv, session.json and, if poses were given,
-    groundtruth.tum. Use as a context manager; closing twice is harmless.
+    groundtruth.tum. `write(..., depth=)` adds that frame's depth (float metres, aligned to the
+    image) to the depth stream; session.json declares the stream when any frame had depth.
+    Use as a context manager; closing twice is harmless.
     """
 
     def __init__(self, folder: str | Path, camera: Camera, fps: float, anchors: list | None = None,
@@ -81,6 +90,7 @@ class RecordingWriter:
             raise SourceError(f"{path}: OpenCV cannot write {fourcc} video here (check the folder is writable)")
         self.times: list[float] = []
         self.poses: list[np.ndarray] = []
+        self.depth_frames = 0  # frames written with depth
         self._t0: float | None = None
         self.closed = False
 
@@ -88,8 +98,10 @@ class RecordingWriter:
     def frame_count(self) -> int:
         return len(self.times)
 
-    def write(self, image: np.ndarray, t: float, world_from_camera: np.ndarray | None = None) -> None:
-        """Append a frame captured at time t (seconds); `world_from_camera` adds a ground-truth pose."""
+    def write(self, image: np.ndarray, t: float, world_from_camera: np.ndarray | None = None,
+              depth: np.ndarray | None = None) -> None:
+        """Append a frame captured at time t (seconds); `world_from_camera` adds a ground-truth pose,
+        `depth` (float HxW, metres along the camera's z, 0 = none, on the image's pixels) its depth."""
         if self.closed:
             raise SourceError(f"{self.folder}: recording already closed")
         h, w = image.shape[:2]
@@ -98,6 +110,14 @@ class RecordingWriter:
                               f"{self.camera.width}x{self.camera.height} of {self.folder}")
         if image.ndim == 2:
             image = cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
+        if depth is not None:
+            if depth.shape != (h, w):
+                raise SourceError(f"depth of shape {depth.shape} does not match the frame's {h}x{w} pixels "
+                                  f"({self.folder}); depth must be aligned to the image")
+            if self.depth_frames == 0:
+                (self.folder / depth_stream.FOLDER).mkdir(exist_ok=True)
+            depth_stream.write_png(self.folder / depth_stream.FOLDER / depth_stream.file_name(len(self.times)), depth)
+            self.depth_frames += 1
         if self._t0 is None:
             self._t0 = float(t)
         self._writer.write(np.ascontiguousarray(image))
@@ -125,6 +145,8 @@ class RecordingWriter:
             write_tum(self.folder / "groundtruth.tum", self.times, self.poses)
         data = {"format": FORMAT, "video": self.video_name, "fps": self.fps, "camera": self.camera.to_dict(),
                 "anchors": self.anchor_blocks, "source": self.source}
+        if self.depth_frames:
+            data["depth"] = depth_stream.block()
         (self.folder / "session.json").write_text(json.dumps(data, indent=2) + "\n")
         return load_session(self.folder)  # validates what was written
 
@@ -138,14 +160,16 @@ class RecordingWriter:
 
 def record(source, folder: str | Path, anchors: list | None = None, seconds: float | None = None,
            max_frames: int | None = None, force: bool = False, fourcc: str = "MJPG", quality: int = 90,
-           progress: Callable[[str], None] | None = None) -> Session:
+           progress: Callable[[str], None] | None = None, depth: bool = True) -> Session:
     """Record frames from `source` (a tracking.sources Source) into `folder` until it ends,
     `seconds` of frame time or `max_frames` have passed, or Ctrl-C (which finishes the file cleanly).
 
     `anchors` (session.json blocks or AnchorSpecs) defaults to the source's own session
     (when it is a recording), else DEFAULT_ANCHORS.
     Timestamps are the source's own (capture times for cameras). Dropped frames
-    are counted from gaps in the source's frame indices. Returns the written Session.
+    are counted from gaps in the source's frame indices. Frames that carry depth
+    (depth cameras, recordings with a depth stream) are recorded with it unless
+    `depth` is False. Returns the written Session.
     """
     if anchors is None and getattr(source, "session", None) is not None:
         anchors = source.session.anchors  # re-recording a recording keeps its anchors
@@ -173,7 +197,7 @@ def record(source, folder: str | Path, anchors: list | None = None, seconds: flo
             if last_index is not None and frame.index > last_index + 1:
                 dropped += frame.index - last_index - 1
             last_index = frame.index
-            writer.write(frame.image, frame.t)
+            writer.write(frame.image, frame.t, depth=getattr(frame, "depth", None) if depth else None)
             n = writer.frame_count
             now = time.monotonic()
             if now - last_print > 0.5:
@@ -188,7 +212,9 @@ def record(source, folder: str | Path, anchors: list | None = None, seconds: flo
             signal.signal(signal.SIGINT, previous)
         session = writer.close()
     n = writer.frame_count
-    progress(f"\rrecorded {writer.folder}: {n} frames, {dropped} dropped" + (" (stopped by Ctrl-C)" if stop["flag"] else "") + "\n")
+    with_depth = f", {writer.depth_frames} with depth" if writer.depth_frames else ""
+    progress(f"\rrecorded {writer.folder}: {n} frames{with_depth}, {dropped} dropped"
+             + (" (stopped by Ctrl-C)" if stop["flag"] else "") + "\n")
     if n == 0:
         raise SourceError(f"{writer.folder}: the source delivered no frames" + (f" ({err})" if err else ""))
     if err:

@@ -1,5 +1,5 @@
-"""Dense depth per view: semi-global matching (OpenCV SGBM) on rectified pairs, then multi-view
-consistency filtering.
+"""Dense depth per view: semi-global matching (OpenCV SGBM) on rectified pairs, or a depth camera's own
+depth (`sensor_depth`), then multi-view consistency filtering.
 
 Each chosen view is paired with a neighbour whose baseline is mostly
 horizontal in the view's image (SGBM matches along rows) and whose viewing
@@ -9,6 +9,10 @@ camera, a `DepthMap` with its own pinhole K and pose (world_from_camera,
 metres). A depth is kept only where at least `min_agree` other depth maps see
 the same surface within a relative tolerance (rejects mismatches, which
 rarely agree across views).
+
+A view that carries depth (an OAK-D's stereo depth, a recording's depth
+stream) needs no matching: `sensor_depth` makes its depth map directly, on
+the view's own (undistorted) camera and pose.
 """
 
 from __future__ import annotations
@@ -105,6 +109,36 @@ def stereo_depth(img_a, img_b, K, pose_a, pose_b, z_range: tuple[float, float], 
     rect_pose = pose_a.copy()
     rect_pose[:3, :3] = pose_a[:3, :3] @ R1.T
     return DepthMap(depth, P1[:3, :3].copy(), rect_pose, ra, index)
+
+
+def sensor_depth(depth: np.ndarray, image: np.ndarray, K: np.ndarray, pose: np.ndarray,
+                 z_range: tuple[float, float], index: int, max_step: float = 0.01,
+                 speckle_px: int = 100) -> DepthMap:
+    """The depth map of a view whose depth came from the camera (float metres along z on the undistorted
+    image's pixels, 0 = none), cleaned as a stereo camera's depth needs (no matching, no cross-check):
+
+    - depths outside `z_range` (m) are dropped, as SGBM's search range drops them;
+    - depth edges: a pixel whose 3x3 neighbourhood spans more than `max_step` x its depth is dropped
+      (mixed foreground/background "flying pixels" at occluding contours, and surfaces seen edge-on);
+    - speckles: connected blobs under `speckle_px` pixels whose neighbours step by less than `max_step`
+      x depth are dropped (isolated mismatches, as SGBM's speckle filter does).
+
+    The camera is the view's own (pinhole `K`, `pose` world_from_camera)."""
+    d = np.asarray(depth, np.float32).copy()
+    if d.shape != image.shape[:2]:
+        raise ValueError(f"view {index}: depth of shape {d.shape} is not aligned to its {image.shape[1]}x"
+                         f"{image.shape[0]} image")
+    d[~np.isfinite(d) | (d < z_range[0]) | (d > z_range[1])] = 0
+    k = np.ones((3, 3), np.uint8)
+    # next to missing depth the window's minimum is 0: the rims of holes go too (mixed pixels live there)
+    d[(cv2.dilate(d, k) - cv2.erode(d, k)) > max_step * d] = 0
+    if speckle_px > 0:
+        step_units = 0.0005   # 0.5 mm counts in int16: depths up to 16 m
+        counts = np.clip(np.rint(d / step_units), 0, 32767).astype(np.int16)
+        max_diff = int(max(1, round(max_step * float(np.median(d[d > 0])) / step_units))) if np.any(d > 0) else 1
+        cv2.filterSpeckles(counts, 0, speckle_px, max_diff)
+        d[counts == 0] = 0
+    return DepthMap(d, np.asarray(K, float).copy(), np.asarray(pose, float).copy(), image, index)
 
 
 def _project(dm: DepthMap, X: np.ndarray):

@@ -8,7 +8,9 @@ Steps (each reports to `progress(stage, done, total)`): the tracker places
 every frame from the markers (metres); views are chosen by sharpness and
 baseline; SIFT + bundle adjustment refine their poses with the markers'
 corners as fixed points; SGBM gives depth per rectified pair, filtered for
-multi-view consistency; the object's region is what stands on the board; a
+multi-view consistency (or, when the frames carry depth from a depth camera or
+a recording's depth stream, each view's own depth is used, cleaned map by map:
+no matching); the object's region is what stands on the board; a
 TSDF over it, closed by the silhouette hull and cut at the paper, gives a
 watertight solid by marching cubes.
 """
@@ -35,7 +37,10 @@ class ScanOptions:
     object); refine: run the SIFT bundle adjustment; voxel: TSDF voxel (m; None = object extent / 90);
     z_margin: SGBM searches depths within the board's reach of the look-at point plus this (m);
     min_agree: depth maps that must confirm a depth; max_frames: frames read at most; keep_frames:
-    candidate views kept in memory (longer recordings are subsampled evenly)."""
+    candidate views kept in memory (longer recordings are subsampled evenly); use_depth: when frames
+    carry depth (depth camera, recorded depth stream), use it instead of SGBM (False: match anyway);
+    depth_views: views used with camera depth (at most max_views): each measured map covers all the
+    object its view sees, so fewer are needed than SGBM pairs (and fusion time grows with their number)."""
 
     max_views: int = 20
     min_angle_deg: float = 7.0
@@ -45,6 +50,8 @@ class ScanOptions:
     min_agree: int = 2
     max_frames: int | None = None
     keep_frames: int = 240
+    use_depth: bool = True
+    depth_views: int = 12
 
 
 @dataclass
@@ -79,7 +86,11 @@ def scan(source, camera, anchors, options: ScanOptions | None = None, progress: 
     if len(views) < 3:
         raise RuntimeError(f"only {len(views)} frames were placed from the markers; keep the board in view "
                            "while circling the object")
-    chosen = select_views(views, opt.max_views, opt.min_angle_deg)
+    with_depth = [v for v in views if v.depth is not None]
+    use_depth = opt.use_depth and len(with_depth) >= 3
+    stats["depth_from"] = "camera" if use_depth else "stereo matching"
+    chosen = select_views(with_depth if use_depth else views,
+                          min(opt.max_views, opt.depth_views) if use_depth else opt.max_views, opt.min_angle_deg)
     if len(chosen) < 3:
         raise RuntimeError("fewer than 3 sharp views from different directions; circle the object more slowly")
     stats["views"] = len(chosen)
@@ -106,17 +117,27 @@ def scan(source, camera, anchors, options: ScanOptions | None = None, progress: 
     # depth search range: what lies within the board's reach of the look-at point (disparity range = time)
     reach = float(np.max(np.linalg.norm(frame.to_world(np.c_[frame.outline, np.zeros(len(frame.outline))])
                                         - target, axis=1))) + opt.z_margin
-    pairs = dpt.choose_pairs(poses, target)
-    maps = []
-    for k, (i, j) in enumerate(pairs):
-        _check(cancel)
+
+    def z_range(i):
         dist = float(np.linalg.norm(poses[i][:3, 3] - target))
-        z_range = (max(0.02, dist - reach), dist + reach)
-        dm = dpt.stereo_depth(chosen[i].image, chosen[j].image, K, poses[i], poses[j], z_range, i)
-        if dm is not None:
-            maps.append(dm)
-        if progress:
-            progress("dense matching", k + 1, len(pairs))
+        return max(0.02, dist - reach), dist + reach
+
+    maps = []
+    if use_depth:   # the camera measured depth: each view is its own depth map
+        for i, v in enumerate(chosen):
+            _check(cancel)
+            maps.append(dpt.sensor_depth(v.depth, v.image, K, poses[i], z_range(i), i))
+            if progress:
+                progress("depth maps", i + 1, len(chosen))
+    else:
+        pairs = dpt.choose_pairs(poses, target)
+        for k, (i, j) in enumerate(pairs):
+            _check(cancel)
+            dm = dpt.stereo_depth(chosen[i].image, chosen[j].image, K, poses[i], poses[j], z_range(i), i)
+            if dm is not None:
+                maps.append(dm)
+            if progress:
+                progress("dense matching", k + 1, len(pairs))
     if len(maps) < 2:
         raise RuntimeError("no pair of views could be matched densely; circle the object at one height too")
     # only what stands on the board matters: the rest is not checked (saves time) and not kept
@@ -125,7 +146,15 @@ def scan(source, camera, anchors, options: ScanOptions | None = None, progress: 
         return frame.on_board(L, 0.01) & (L[:, 2] > -0.01)
 
     _check(cancel)
-    dpt.filter_consistent(maps, min_agree=opt.min_agree, keep=on_board)
+    if use_depth:
+        # the camera's left-right check and sensor_depth's edge and speckle filters stand in for the
+        # cross-check, which on dense measured maps would cost more than all the rest of this step.
+        # Only what stands on the board is kept.
+        for dm in maps:
+            X, flat = dm.points()
+            dm.depth.ravel()[flat[~on_board(X)]] = 0
+    else:
+        dpt.filter_consistent(maps, min_agree=opt.min_agree, keep=on_board)
     maps = [m for m in maps if np.count_nonzero(m.depth) > 500]
     stats["depth_maps"] = len(maps)
     timings["depth_s"] = time.perf_counter() - t

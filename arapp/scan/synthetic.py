@@ -17,7 +17,9 @@ rendered with pyrender offscreen (unlit textures: a Lambertian surface under
 ambient light, so colours do not change with the view) and written through
 tracking.recorder.RecordingWriter (lossless FFV1 when available) with
 groundtruth.tum. Ground-truth depth maps are returned on request (the
-benchmark's ceiling peer fuses them).
+benchmark's ceiling peer fuses them) and, with `with_depth=True`, written as
+the recording's depth stream (16-bit PNG, millimetres: what a depth camera's
+recording holds, docs/recording-format.md).
 """
 
 from __future__ import annotations
@@ -222,19 +224,24 @@ def render_scan(poses: list[np.ndarray], K: np.ndarray, width: int, height: int,
 
 
 def write_vase_recording(folder: str | Path, n_frames: int = 48, width: int = 640, height: int = 480,
-                         distance: float = 0.30, seed: int = 7, force: bool = True) -> VaseTruth:
-    """Render the orbit and write it as an arapp-recording/1 folder with groundtruth.tum; returns the truth."""
+                         distance: float = 0.30, seed: int = 7, force: bool = True,
+                         with_depth: bool = False) -> VaseTruth:
+    """Render the orbit and write it as an arapp-recording/1 folder with groundtruth.tum (and, with
+    `with_depth`, the renderer's exact depth as the depth stream, rounded to 1 mm); returns the truth."""
     from tracking.camera import Camera
     from tracking.recorder import RecordingWriter
 
     truth = vase_truth()
     K = default_K(width, height)
     poses = orbit_poses(truth, n_frames, distance)
-    images = render_scan(poses, K, width, height, seed)
+    if with_depth:
+        images, depths = render_scan(poses, K, width, height, seed, with_depth=True)
+    else:
+        images, depths = render_scan(poses, K, width, height, seed), [None] * len(poses)
     camera = Camera(K, np.zeros(5), width, height)
     fps = 10.0
     with RecordingWriter(folder, camera, fps, anchors=[dict(BOARD)], source={"kind": "synthetic", "scene": "scan_vase"},
                          fourcc="FFV1", force=force) as wr:
-        for i, (img, T) in enumerate(zip(images, poses)):
-            wr.write(img, i / fps, T)
+        for i, (img, T, depth) in enumerate(zip(images, poses, depths)):
+            wr.write(img, i / fps, T, depth=depth)
     return truth

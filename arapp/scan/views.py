@@ -2,8 +2,11 @@
 
 A `View` holds an undistorted BGR image (pinhole `K`, no distortion: every
 later step works on these), its metric pose `world_from_camera` (4x4, OpenCV
-camera axes, metres in the recording's world frame) and its sharpness
-(variance of the Laplacian of the grey image, grey levels squared).
+camera axes, metres in the recording's world frame), its sharpness
+(variance of the Laplacian of the grey image, grey levels squared) and, when
+the source gives depth (a depth camera, a recording with a depth stream), its
+depth map on the undistorted image's pixels (float32 metres along the
+camera's z, 0 = none).
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ class View:
     image: np.ndarray
     pose: np.ndarray
     sharpness: float
+    depth: np.ndarray | None = None
 
     @property
     def center(self) -> np.ndarray:
@@ -44,7 +48,9 @@ def sharpness(gray: np.ndarray) -> float:
 def track_views(source, camera, anchors, progress: Callable[[str, int, int], None] | None = None,
                 cancel=None, max_frames: int | None = None, every: int = 1) -> list[View]:
     """Run the tracker (anchors only: the markers give metric poses; keypoint SLAM adds nothing while
-    the board is in view) over `source`; keep the frames it placed from the markers, undistorted."""
+    the board is in view) over `source`; keep the frames it placed from the markers, undistorted (their
+    depth too, when frames carry it). A recording that ends with an error (a damaged video or depth
+    file) stops the scan with that error rather than scanning part of it."""
     from tracking.tracker import Tracker
 
     tracker = Tracker(camera, anchors, slam=False, filter=False)
@@ -70,10 +76,18 @@ def track_views(source, camera, anchors, progress: Callable[[str, int, int], Non
             if res.world_from_camera is None or res.state != "marker" or (n - 1) % every:
                 continue
             img = frame.image if maps is None else cv2.remap(frame.image, maps[0], maps[1], cv2.INTER_LINEAR)
+            depth = getattr(frame, "depth", None)
+            if depth is not None and maps is not None:
+                # nearest, not linear: blending depths across an occluding edge invents surfaces
+                depth = cv2.remap(depth, maps[0], maps[1], cv2.INTER_NEAREST)
             gray = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-            views.append(View(frame.index, frame.t, img, np.array(res.world_from_camera, float), sharpness(gray)))
+            views.append(View(frame.index, frame.t, img, np.array(res.world_from_camera, float), sharpness(gray),
+                              depth))
     finally:
         tracker.close()
+    error = getattr(source, "error", None)
+    if error and error != getattr(source, "notice", None) and not getattr(source, "live", False):
+        raise RuntimeError(f"{error}; nothing was scanned")
     return views
 
 

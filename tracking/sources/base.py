@@ -27,11 +27,15 @@ class SourceWarning(RuntimeWarning):
 @dataclass(frozen=True)
 class Frame:
     """One frame: `index` (0-based position in the source), `t` (seconds from the source's first
-    frame; recording time for recordings, capture time for cameras), `image` (BGR uint8, HxWx3)."""
+    frame; recording time for recordings, capture time for cameras), `image` (BGR uint8, HxWx3), and
+    `depth` when the source gives depth (depth cameras, recordings with a depth stream): float32 HxW,
+    metres along the camera's z, aligned to `image` pixel for pixel (same camera), 0 where unknown;
+    else None."""
 
     index: int
     t: float
     image: np.ndarray
+    depth: np.ndarray | None = None
 
 
 class Source:

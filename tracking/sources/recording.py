@@ -1,9 +1,11 @@
 """Recording folders (`arapp-recording/1`, spec `file:FOLDER` or the folder's path): frames at the
-timestamps of frames.csv, checked against the video."""
+timestamps of frames.csv, checked against the video, with their depth when the recording has a depth
+stream (tracking.depth_stream)."""
 
 from __future__ import annotations
 
 import csv
+import json
 import time
 import warnings
 from pathlib import Path
@@ -12,6 +14,7 @@ from typing import Iterator
 import cv2
 import numpy as np
 
+from tracking import depth_stream
 from tracking.errors import SessionError, SourceError
 from tracking.session import Session, load_session
 
@@ -70,12 +73,18 @@ class RecordingSource(Source):
     moment the first one is taken, scaled by `speed`; else as fast as possible.
     loop: start over after the last frame (`index` and `t` restart; `.loops`
     counts the restarts). `seek(frame=)` / `seek(t=)` sets the next frame.
+    depth: read the recording's depth stream when it has one (`has_depth`): each
+    frame's `depth` is then float32 metres on the image's pixels (None for a
+    frame without a depth file). The depth files are checked when the recording
+    is opened (names, sizes, 16-bit greyscale PNG); one that then fails to
+    decode ends the replay with `.error` naming it.
     """
 
     kind = "recording"
     seekable = True
 
-    def __init__(self, folder: str | Path, realtime: bool = False, loop: bool = False, speed: float = 1.0):
+    def __init__(self, folder: str | Path, realtime: bool = False, loop: bool = False, speed: float = 1.0,
+                 depth: bool = True):
         super().__init__()
         self.folder = Path(folder)
         self.session: Session = load_session(self.folder)
@@ -110,12 +119,34 @@ class RecordingSource(Source):
                 raise SourceError(f"{self.video_path}: frame count unknown and no frames.csv; add frames.csv")
             self.times = np.arange(n) / self.fps
         self.frame_count = len(self.times)
+        self.depth: depth_stream.DepthStream | None = None
+        if depth:
+            try:
+                self.depth = self._open_depth()
+            except SessionError:
+                self._cap.release()
+                raise
         self._next = 0
         self._pace_origin: float | None = None
         self._first_img = first
         self.loops = 0
         self.info = {"kind": "file", "recording": str(self.folder), **{k: v for k, v in self.session.source.items()
                                                                       if k != "kind"}}
+
+    def _open_depth(self) -> depth_stream.DepthStream | None:
+        """The depth stream session.json declares (checked), or None. The session reader
+        (tracking.session) ignores the block, so it is read here from the file itself."""
+        path = self.folder / "session.json"
+        data = json.loads(path.read_text(encoding="utf-8"))  # load_session has read it already: valid JSON
+        spec = depth_stream.parse_block(data.get("depth"), self.folder, str(path))
+        if spec is None:
+            return None
+        return depth_stream.DepthStream(spec, self.frame_count, self.camera.width, self.camera.height)
+
+    @property
+    def has_depth(self) -> bool:
+        """Whether frames carry depth (the recording has a depth stream and it is read)."""
+        return self.depth is not None
 
     def describe(self) -> str:
         return f"recording {self.folder}"
@@ -174,6 +205,13 @@ class RecordingSource(Source):
                 self._fail(f"{self.video_path}: decoding stopped at frame {i} of {self.frame_count} "
                            f"(truncated or corrupt video); frames before it were replayed")
                 return
+            depth = None
+            if self.depth is not None:
+                try:
+                    depth = self.depth.read(i)
+                except SourceError as e:
+                    self._fail(f"{e}; frames before {i} were replayed")
+                    return
             t = float(self.times[i])
             if self.realtime:
                 now = time.monotonic()
@@ -183,7 +221,7 @@ class RecordingSource(Source):
                 if wait > 0:
                     time.sleep(wait)
             self._next = i + 1
-            yield Frame(i, t, img)
+            yield Frame(i, t, img, depth)
 
     def _release(self) -> None:
         self._cap.release()
