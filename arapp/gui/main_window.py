@@ -28,6 +28,7 @@ from arapp.gui.panels.model import MODEL_FILTER, ModelPanel, library_files
 from arapp.gui.panels.replay import ReplayBar
 from arapp.gui.panels.tracking import AnchorsDialog, TrackingPanel
 from arapp.gui.print_dialog import PrintDialog
+from arapp.gui.scan_panel import install_scan
 from arapp.gui.source_dialog import SourceDialog, ask_recording, ask_video_spec
 from arapp.gui.tasks import QtRunner, Task, init_ui_bridge, on_ui
 from arapp.gui.view import VideoView
@@ -72,6 +73,7 @@ class MainWindow(QMainWindow):
         self._status_timer.timeout.connect(self._refresh_status)
         self._status_timer.start()
         install_habits(self)  # undo/redo, export, screenshot, AR video, title, controls enabled when they can act
+        install_scan(self)  # scan mode: the Scan dock and the dome of view directions over the view
         QTimer.singleShot(0, self._start_thumbnails)
         QTimer.singleShot(0, self.freeze_heap)
 
