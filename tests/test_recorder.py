@@ -6,6 +6,7 @@ import json
 import os
 import signal
 
+import cv2
 import numpy as np
 import pytest
 
@@ -15,7 +16,8 @@ from tracking.recorder import RecordingWriter, record
 from tracking.session import load_session
 from tracking.sources import RecordingSource, open_source
 
-from test_sources import CAM, TIMES, frame_image, make_recording  # noqa: E402 - shared fixtures
+from test_sources import (CAM, NO_DEPTH_FRAME, TIMES, depth_of, depth_rule, frame_image,  # noqa: E402 - shared
+                          make_depth_recording, make_recording)
 
 ANCHORS = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
             "marker_length": 0.04, "separation": 0.01, "first_id": 0},
@@ -142,3 +144,66 @@ def test_cli_record_messages(rec, tmp_path, capsys):
     assert main(["record", "--source", video, "--calibration", str(tmp_path / "cam.yaml"),
                  "--out", str(tmp_path / "z")]) == 2
     assert "use --force" in capsys.readouterr().err
+
+
+# -- the depth stream (issue 17 item 2) --------------------------------------------------------------------
+
+def _check_depth_frames(folder, n):
+    """Replayed depth within 1 mm of what was given (0.5 mm: rounded to whole millimetres), 0 where the
+    files cannot hold a depth, None for the frame that had none; the files themselves by the written rule."""
+    with RecordingSource(folder) as src:
+        assert src.has_depth
+        frames = list(src)
+    assert [f.index for f in frames] == list(range(n))
+    for f in frames:
+        png = folder / "depth" / f"{f.index:06d}.png"
+        if f.index == NO_DEPTH_FRAME:
+            assert f.depth is None and not png.exists()
+            continue
+        raw = cv2.imread(str(png), cv2.IMREAD_UNCHANGED)   # OpenCV's reader, not the code under test
+        np.testing.assert_array_equal(raw, depth_rule(depth_of(f.index)))
+        given = depth_of(f.index)
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(given) & (given > 0.0005) & (given < 65.535)
+        assert f.depth.dtype == np.float32 and f.depth.shape == given.shape
+        assert np.max(np.abs(f.depth[valid] - given[valid])) <= 0.0005 + 1e-6
+        assert np.all(f.depth[~valid] == 0)
+
+
+def test_depth_stream_round_trip_is_exact_to_a_millimetre(tmp_path):
+    n = 8
+    rec = make_depth_recording(tmp_path / "d", n)
+    data = json.loads((rec / "session.json").read_text())
+    assert data["depth"] == {"path": "depth", "encoding": "png16", "units": "mm", "scale": 0.001,
+                             "aligned_to": "camera"}
+    _check_depth_frames(rec, n)
+    # arapp record from a source that gives depth records it; --no-depth leaves it out
+    lines = []
+    with open_source(str(rec)) as src:
+        record(src, tmp_path / "copy", fourcc="FFV1", progress=lines.append)
+    assert f"{n} frames, {n - 1} with depth" in lines[-1]
+    _check_depth_frames(tmp_path / "copy", n)
+    with open_source(str(rec)) as src:
+        record(src, tmp_path / "plain", fourcc="FFV1", progress=lambda s: None, depth=False)
+    assert not (tmp_path / "plain" / "depth").exists()
+    assert "depth" not in json.loads((tmp_path / "plain" / "session.json").read_text())
+    with RecordingSource(tmp_path / "plain") as src:
+        assert not src.has_depth and all(f.depth is None for f in src)
+
+
+def test_cli_record_keeps_or_drops_depth(tmp_path, capsys):
+    rec = make_depth_recording(tmp_path / "d", 6)
+    assert main(["record", "--source", str(rec), "--out", str(tmp_path / "a"), "--codec", "FFV1"]) == 0
+    assert "depth for 5 frames (depth/, 16-bit PNG, mm)" in capsys.readouterr().out
+    _check_depth_frames(tmp_path / "a", 6)
+    assert main(["record", "--source", str(rec), "--out", str(tmp_path / "b"), "--no-depth"]) == 0
+    assert "depth" not in capsys.readouterr().out and not (tmp_path / "b" / "depth").exists()
+
+
+def test_writer_refuses_depth_not_aligned_to_the_frame(tmp_path):
+    w = RecordingWriter(tmp_path / "c", CAM, 30)
+    with pytest.raises(SourceError, match=r"depth of shape \(60, 80\) does not match the frame's 120x160"):
+        w.write(frame_image(0), 0.0, depth=np.ones((60, 80)))
+    with pytest.raises(SourceError, match="depth must be a float array in metres, got dtype uint16"):
+        w.write(frame_image(0), 0.0, depth=np.ones((120, 160), np.uint16))
+    w.close()

@@ -495,3 +495,306 @@ def test_arapp_replay_reports_a_short_frames_csv(rec_mjpg, tmp_path, capsys):
         rc = main(["replay", str(short), "--out", str(tmp_path / "out"), "--no-video", "--no-slam"])
     out = capsys.readouterr().out
     assert rc == 0 and "frames.csv: lists 12 frames" in out
+
+
+# -- depth: the recording's depth stream and the OAK-D's stereo depth (issue 17 item 2) -------------------
+
+def depth_of(i: int) -> np.ndarray:
+    """Frame i's depth (float64 metres): continuous values (not whole millimetres, so rounding is tested),
+    holes, and values the 16-bit millimetre files cannot hold (NaN, negative, beyond 65.535 m)."""
+    d = 0.25 + 1.5 * np.random.default_rng(100 + i).random((H, W))
+    d[::7, ::5] = 0.0
+    d[0, 0], d[0, 1], d[0, 2], d[0, 3] = np.nan, -0.5, 70.0, np.inf
+    return d
+
+
+def depth_rule(d: np.ndarray) -> np.ndarray:
+    """What a depth file must hold (docs/recording-format.md): whole millimetres, rounded; 0 = no depth."""
+    with np.errstate(invalid="ignore"):
+        mm = np.rint(d * 1000.0)
+        ok = np.isfinite(mm) & (mm > 0) & (mm <= 65535)
+    return np.where(ok, mm, 0).astype(np.uint16)
+
+
+NO_DEPTH_FRAME = 3  # a frame the camera gave no depth for
+
+
+def make_depth_recording(folder: Path, n: int = 8) -> Path:
+    with RecordingWriter(folder, CAM, 30.0, None, {"kind": "synthetic"}, fourcc="FFV1") as w:
+        for i in range(n):
+            w.write(frame_image(i), TIMES[i], depth=None if i == NO_DEPTH_FRAME else depth_of(i))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def depth_rec(tmp_path_factory) -> Path:
+    return make_depth_recording(tmp_path_factory.mktemp("depth") / "r")
+
+
+def _png16(path: Path, shape=(H, W), channels: int = 1, dtype=np.uint16) -> None:
+    img = np.full(shape + ((channels,) if channels > 1 else ()), 200, dtype)
+    assert cv2.imwrite(str(path), img)
+
+
+def _edit_block(folder: Path, **changes) -> None:
+    data = json.loads((folder / "session.json").read_text())
+    data["depth"].update(changes)
+    (folder / "session.json").write_text(json.dumps(data))
+
+
+BAD_DEPTH = {
+    "folder gone": (lambda f: shutil.rmtree(f / "depth"), r"depth: missing; .*session.json declares a depth stream"),
+    "not a png": (lambda f: (f / "depth" / "000002.png").write_text("not an image"),
+                  r"000002.png: not a PNG file; depth frames are 16-bit greyscale PNGs"),
+    "8-bit": (lambda f: _png16(f / "depth" / "000002.png", dtype=np.uint8), r"000002.png: a 8-bit PNG"),
+    "colour": (lambda f: _png16(f / "depth" / "000002.png", channels=3), r"000002.png: .*colour type 2"),
+    "size": (lambda f: _png16(f / "depth" / "000002.png", shape=(60, 80)),
+             r"000002.png: depth of 80x60 but the camera is 160x120"),
+    "frame beyond the end": (lambda f: shutil.copy(f / "depth" / "000002.png", f / "depth" / "000099.png"),
+                             r"000099.png: depth for frame 99, but the recording has frames 0..7"),
+    "stray file": (lambda f: (f / "depth" / "notes.txt").write_text("x"),
+                   r"notes.txt: unexpected file in the depth folder"),
+    "scale": (lambda f: _edit_block(f, scale=-1), r"session.json: depth.scale: must be the metres of one count"),
+    "units": (lambda f: _edit_block(f, scale=0.01), r"depth.units says 'mm' but depth.scale is 0.01"),
+    "alignment": (lambda f: _edit_block(f, aligned_to="left"), r"depth.aligned_to: must be 'camera'"),
+    "encoding": (lambda f: _edit_block(f, encoding="exr"), r"depth.encoding: only 'png16'"),
+    "unknown key": (lambda f: _edit_block(f, fps=30), r"depth.fps: unknown key"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_DEPTH))
+def test_bad_depth_files_are_one_line_errors_naming_the_file(depth_rec, tmp_path, case):
+    damage, message = BAD_DEPTH[case]
+    folder = tmp_path / "r"
+    shutil.copytree(depth_rec, folder)
+    damage(folder)
+    with pytest.raises(SessionError, match=message) as e:
+        RecordingSource(folder)
+    assert "\n" not in str(e.value) and str(folder) in str(e.value)
+    RecordingSource(folder, depth=False).close()  # the colour frames stay usable without the depth stream
+
+
+def test_a_truncated_depth_file_ends_the_replay_naming_it(depth_rec, tmp_path):
+    folder = tmp_path / "r"
+    shutil.copytree(depth_rec, folder)
+    png = folder / "depth" / "000005.png"
+    png.write_bytes(png.read_bytes()[:200])  # the header survives; the data does not
+    with RecordingSource(folder) as src:
+        with pytest.warns(SourceWarning, match="000005.png: the depth PNG cannot be decoded"):
+            frames = list(src)
+    assert [f.index for f in frames] == [0, 1, 2, 3, 4]
+    assert "000005.png" in src.error and "\n" not in src.error
+
+
+def test_recording_without_depth_has_none(rec):
+    assert not (rec / "depth").exists() and "depth" not in json.loads((rec / "session.json").read_text())
+    with RecordingSource(rec) as src:
+        assert not src.has_depth
+        assert all(f.depth is None for f in src)
+
+
+class _FakeDepthAI:
+    """A stand-in depthai v3 module for an OAK device with stereo depth (no device in CI). It records the
+    calls the source makes and delivers colour frames, or Sync message groups {rgb, depth}."""
+
+    def __init__(self, sockets=("CAM_A", "CAM_B", "CAM_C"), platform="RVC2", n=3, depth_shape=None):
+        self.calls = []
+        calls = self.calls
+        size = {"w": 0, "h": 0}
+        mm = lambda seq, shape: (np.arange(shape[0] * shape[1]).reshape(shape) % 4000 + 200 + seq).astype(np.uint16)
+        self.mm = mm
+
+        class Img:
+            def __init__(self, seq, arr):
+                self.seq, self.arr = seq, arr
+
+            def getCvFrame(self):
+                return self.arr
+
+            getFrame = getCvFrame
+
+            def getTimestamp(self):
+                return timedelta(seconds=10 + self.seq / 30)
+
+            def getSequenceNum(self):
+                return self.seq
+
+            def getTransformation(self):
+                raise AttributeError("no transformation in this stand-in")
+
+        class Group(dict):
+            pass
+
+        class Queue:
+            def __init__(self, name):
+                self.name, self.seqs = name, list(range(n))
+
+            def get(self, timeout):
+                if not self.seqs:
+                    return None
+                seq = self.seqs.pop(0)
+                rgb = Img(seq, np.full((size["h"], size["w"], 3), seq, np.uint8))
+                if self.name != "sync.out":
+                    return rgb
+                shape = depth_shape or (size["h"], size["w"])
+                return Group(rgb=rgb, depth=Img(seq, mm(seq, shape)))
+
+        class Output:
+            def __init__(self, name):
+                self.name = name
+
+            def link(self, target):
+                calls.append(("link", self.name, target))
+
+            def createOutputQueue(self, maxSize, blocking):
+                calls.append(("queue", self.name))
+                return Queue(self.name)
+
+        class CameraNode:
+            def build(self, socket):
+                self.socket = socket
+                return self
+
+            def requestOutput(self, size_, type=None, fps=None, enableUndistortion=None):
+                calls.append(("output", self.socket, tuple(size_), type, fps, enableUndistortion))
+                if self.socket == "CAM_A":
+                    size["w"], size["h"] = size_
+                return Output(f"{self.socket}.out")
+
+        class StereoDepth:
+            PresetMode = types.SimpleNamespace(DEFAULT="DEFAULT")
+
+            def __init__(self):
+                self.depth, self.inputAlignTo = Output("stereo.depth"), "stereo.inputAlignTo"
+
+            def build(self, left, right, presetMode):
+                calls.append(("stereo", left.name, right.name, presetMode))
+                return self
+
+            def __getattr__(self, name):  # setLeftRightCheck, setSubpixel, setExtendedDisparity
+                return lambda *a: calls.append((name, *a))
+
+        class Sync:
+            def __init__(self):
+                self.inputs = {"rgb": "sync.rgb", "depth": "sync.depth"}
+                self.out = Output("sync.out")
+
+            def setSyncThreshold(self, dt):
+                calls.append(("sync threshold", dt))
+
+        class ImageAlign:
+            def __init__(self):
+                self.input, self.inputAlignTo = "align.input", "align.inputAlignTo"
+                self.outputAligned = Output("align.outputAligned")
+
+        class Pipeline:
+            def __init__(self, device):
+                pass
+
+            def create(self, node):
+                calls.append(("create", node.__name__))
+                return node()
+
+            def start(self):
+                calls.append("start")
+
+            def stop(self):
+                calls.append("stop")
+
+        class Info:
+            name, state = "1.2", "X_LINK_UNBOOTED"
+
+            def getDeviceId(self):
+                return "OAKD"
+
+        class Calib:
+            def getCameraIntrinsics(self, socket, w, h):
+                return [[0.8 * w, 0, (w - 1) / 2], [0, 0.8 * w, (h - 1) / 2], [0, 0, 1]]
+
+            def getDistortionCoefficients(self, socket):
+                return [0.1, -0.05, 0, 0] + [0.0] * 10
+
+        class Device:
+            @staticmethod
+            def getAllAvailableDevices():
+                return [Info()]
+
+            def __init__(self, info):
+                pass
+
+            def readCalibration(self):
+                return Calib()
+
+            def getConnectedCameras(self):
+                return list(sockets)
+
+            def getPlatform(self):
+                return platform
+
+            def close(self):
+                calls.append("close")
+
+        self.module = types.SimpleNamespace(
+            Device=Device, Pipeline=Pipeline, Platform=types.SimpleNamespace(RVC2="RVC2", RVC4="RVC4"),
+            node=types.SimpleNamespace(Camera=CameraNode, StereoDepth=StereoDepth, Sync=Sync, ImageAlign=ImageAlign),
+            CameraBoardSocket=types.SimpleNamespace(CAM_A="CAM_A", CAM_B="CAM_B", CAM_C="CAM_C"),
+            ImgFrame=types.SimpleNamespace(Type=types.SimpleNamespace(BGR888i="BGR888i")))
+
+
+import types  # noqa: E402 - used by the stand-in above
+from datetime import timedelta  # noqa: E402
+
+
+def _open_fake(monkeypatch, fake, **kw):
+    import sys
+
+    from tracking.sources import DepthAISource
+
+    monkeypatch.setitem(sys.modules, "depthai", fake.module)
+    return DepthAISource(width=W, height=H, fps=30.0, **kw)
+
+
+@pytest.mark.parametrize("platform", ["RVC2", "RVC4"])
+def test_depthai_gives_stereo_depth_aligned_to_the_colour_camera(monkeypatch, platform):
+    """The depthai v3 calls for depth aligned to CAM_A, against a stand-in module (not a real OAK-D)."""
+    fake = _FakeDepthAI(platform=platform)
+    with _open_fake(monkeypatch, fake) as src:
+        assert src.has_depth and src.info["depth"]["aligned_to"] == "CAM_A"
+        assert np.all(src.camera.dist == 0)  # colour undistorted on the device, like the depth aligned to it
+        with pytest.warns(SourceWarning):
+            frames = list(src)
+    calls = fake.calls
+    assert ("output", "CAM_A", (W, H), "BGR888i", 30.0, True) in calls  # undistorted colour
+    assert ("output", "CAM_B", (640, 400), None, 30.0, None) in calls
+    assert ("stereo", "CAM_B.out", "CAM_C.out", "DEFAULT") in calls
+    assert ("setLeftRightCheck", True) in calls and ("setSubpixel", True) in calls
+    assert ("link", "CAM_A.out", "sync.rgb") in calls and ("queue", "sync.out") in calls
+    if platform == "RVC2":
+        assert ("link", "CAM_A.out", "stereo.inputAlignTo") in calls
+        assert ("link", "stereo.depth", "sync.depth") in calls
+    else:
+        assert ("link", "stereo.depth", "align.input") in calls and ("link", "CAM_A.out", "align.inputAlignTo") in calls
+        assert ("link", "align.outputAligned", "sync.depth") in calls
+    assert [f.index for f in frames] == [0, 1, 2]
+    for f in frames:
+        assert f.depth.dtype == np.float32 and f.depth.shape == (H, W)
+        np.testing.assert_allclose(f.depth, fake.mm(f.index, (H, W)) / 1000.0, atol=1e-6)  # mm -> m
+
+
+def test_depthai_depth_off_missing_or_at_another_size(monkeypatch):
+    fake = _FakeDepthAI()
+    with _open_fake(monkeypatch, fake, depth=False) as src:
+        with pytest.warns(SourceWarning):
+            assert all(f.depth is None for f in src)
+    assert not src.has_depth and ("create", "StereoDepth") not in fake.calls
+    assert src.camera.dist[0] == 0.1  # colour-only keeps the device's distortion
+    oak1 = _FakeDepthAI(sockets=("CAM_A",))
+    with _open_fake(monkeypatch, oak1) as src:
+        assert not src.has_depth
+    with pytest.raises(SourceError, match="has no stereo pair \\(CAM_B and CAM_C\\), so no depth"):
+        _open_fake(monkeypatch, _FakeDepthAI(sockets=("CAM_A",)), depth=True)
+    half = _FakeDepthAI(depth_shape=(H // 2, W // 2))
+    with _open_fake(monkeypatch, half) as src:
+        f = next(iter(src))
+    assert f.depth.shape == (H, W)
+    np.testing.assert_allclose(f.depth[::2, ::2], half.mm(0, (H // 2, W // 2)) / 1000.0, atol=1e-6)

@@ -1,6 +1,6 @@
 """`arapp record`: record a source into a recording folder (arapp-recording/1)."""
 
-HELP = "record a camera or video into a recording folder (video, frames.csv, session.json)"
+HELP = "record a camera or video into a recording folder (video, frames.csv, session.json, depth/ from depth cameras)"
 
 
 def add_arguments(parser):
@@ -15,6 +15,9 @@ def add_arguments(parser):
     parser.add_argument("--fps", type=float, help="requested camera frame rate")
     parser.add_argument("--codec", default="MJPG", choices=["MJPG", "FFV1"],
                         help="MJPG (.avi, intra-frame) or FFV1 (.mkv, lossless)")
+    parser.add_argument("--no-depth", action="store_true",
+                        help="leave out the depth stream a depth camera (OAK-D) or recording gives "
+                             "(default: recorded as depth/, 16-bit PNG in millimetres)")
     parser.add_argument("--force", action="store_true", help="overwrite an existing recording")
 
 
@@ -52,6 +55,9 @@ def run(args):
         src.camera  # noqa: B018 - fail before creating files if the source has no calibration
         # Recorded into a temporary folder that replaces --out at the end: a failure leaves nothing behind.
         with staged_folder(out, replace=True) as tmp:
-            session = record(src, tmp, anchors=anchors, seconds=args.seconds, force=True, fourcc=args.codec)
-    print(f"{out}: {session.video}, {session.camera.width}x{session.camera.height} @ {session.fps:.1f} fps")
+            session = record(src, tmp, anchors=anchors, seconds=args.seconds, force=True, fourcc=args.codec,
+                             depth=not args.no_depth)
+    n_depth = len(list((out / "depth").glob("*.png"))) if (out / "depth").is_dir() else 0
+    depth = f", depth for {n_depth} frames (depth/, 16-bit PNG, mm)" if n_depth else ""
+    print(f"{out}: {session.video}, {session.camera.width}x{session.camera.height} @ {session.fps:.1f} fps{depth}")
     return 0
