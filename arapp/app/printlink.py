@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from serial.tools import list_ports
 
 from arapp.printing.link import LinkLost, OctoPrintTarget, PrinterHalted, SerialTarget, make_link
+from arapp.printing.gcode import format_duration
 
 __all__ = ["SerialTarget", "OctoPrintTarget", "PrintEvent", "PrintJob", "start_job", "serial_ports"]
 
@@ -46,15 +47,8 @@ def serial_ports() -> list[str]:
 
 
 def format_duration_s(seconds: float | None) -> str:
-    """'1 h 05 min', '12 min', '40 s'; '?' when unknown."""
-    if seconds is None:
-        return "?"
-    s = max(0, int(round(seconds)))
-    if s >= 3600:
-        return f"{s // 3600} h {s % 3600 // 60:02d} min"
-    if s >= 60:
-        return f"{s // 60} min {s % 60:02d} s" if s < 600 else f"{s // 60} min"
-    return f"{s} s"
+    """arapp.printing.gcode.format_duration ('1 h 05 min', '48 min 0 s', '40 s'); '?' when unknown."""
+    return "?" if seconds is None else format_duration(seconds)
 
 
 def layer_text(progress) -> str:
@@ -66,15 +60,10 @@ def layer_text(progress) -> str:
 
 
 def progress_text(progress) -> str:
-    """The status line of a Progress: state, percent, layer, lines, elapsed and ETA, the printer's message."""
-    parts = [progress.state, f"{progress.percent:.1f} %"]
-    lt = layer_text(progress)
-    if lt:
-        parts.append(lt)
-    parts.append(f"line {progress.lines_done} / {progress.lines_total}")
-    parts.append(f"elapsed {format_duration_s(progress.elapsed_s)}")
-    if progress.eta_s is not None:
-        parts.append(f"ETA {format_duration_s(progress.eta_s)}")
+    """The status line of a Progress: state, lines sent, elapsed time, the printer's message."""
+    # the percent, layer and time left have their own places in the dialog: shown once, there
+    parts = [progress.state, f"line {progress.lines_done} / {progress.lines_total}",
+             f"elapsed {format_duration_s(progress.elapsed_s)}"]
     if progress.message:
         parts.append(progress.message)
     return "   ".join(parts)

@@ -37,6 +37,10 @@ from arapp.placement import Placement, dragged_placement, placement_point_at_pix
 from tracking.session import parse_anchors
 
 RECENT_MAX = 8
+# while the print preview stands on the bed, the model on its marker is drawn see-through: one solid part
+# in view, not two (the user may have the bed and the marker in the same picture)
+GHOST_MODE = "translucent"
+GHOST_NOTE = "Print preview on the bed: the model on the marker is drawn see-through meanwhile"
 DEFAULT_ANCHORS = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
                     "marker_length": 0.04, "separation": 0.01, "first_id": 0}]
 
@@ -420,14 +424,19 @@ class Session:
             return
         self.model_gen += 1
         self.send(cmd.SetModel(self.model_gen, self.model_path if self.model is not None else None,
-                               dict(self.edits), self.placement, self.mode, model=self.model))
+                               dict(self.edits), self.placement, self.display_mode, model=self.model))
+
+    @property
+    def display_mode(self) -> str:
+        """The mode the model is drawn in: the chosen one, or the ghost while a print preview is shown."""
+        return GHOST_MODE if self.toolpaths_spec is not None else self.mode
 
     def set_mode(self, mode: str) -> None:
         if mode not in MODES:
             raise ValueError(f"display mode must be one of {', '.join(MODES)}, got {mode!r}")
         self.mode = mode
         self.settings.setValue("mode", mode)
-        self.send(cmd.SetMode(mode))
+        self.send(cmd.SetMode(self.display_mode))
         self.events.mode_changed.emit(mode)
 
     def select_point(self, k: int, i: int, j: int) -> None:
@@ -510,8 +519,13 @@ class Session:
     def set_toolpaths(self, spec: dict | None) -> None:
         """Show the print preview `spec` (arapp.app.toolpaths.preview_spec) on the bed; None clears it."""
         self.toolpaths_gen += 1
+        ghost_before = self.toolpaths_spec is not None
         self.toolpaths_spec = None if spec is None else dict(spec)
         self.send(cmd.ShowToolpaths(self.toolpaths_spec, self.toolpaths_gen))
+        if (self.toolpaths_spec is not None) != ghost_before:
+            self.send(cmd.SetMode(self.display_mode))
+            if self.toolpaths_spec is not None:
+                self.status(GHOST_NOTE, 10000)
 
     def _toolpaths_shown(self, info: dict) -> None:
         self.toolpaths_info = info

@@ -28,6 +28,7 @@ from arapp.gui.panels.model import MODEL_FILTER, ModelPanel, library_files
 from arapp.gui.panels.replay import ReplayBar
 from arapp.gui.panels.tracking import AnchorsDialog, TrackingPanel
 from arapp.gui.print_dialog import PrintDialog
+from arapp.gui.print_panel import show_print_panel
 from arapp.gui.scan_panel import install_scan
 from arapp.gui.source_dialog import SourceDialog, ask_recording, ask_video_spec
 from arapp.gui.tasks import QtRunner, Task, init_ui_bridge, on_ui
@@ -309,14 +310,16 @@ class MainWindow(QMainWindow):
     def open_print_dialog(self) -> None:
         old = self._print_dialog
         if old is not None and old.printing:
-            old.show()  # a print is running: its dialog, not a new one
-            old.raise_()
+            old.show()  # a print is running: its panel, not a new one
+            if getattr(self, "print_dock", None) is not None:
+                self.print_dock.show()
+                self.print_dock.raise_()
             return
         ps = self.session.new_print_session()
         if ps is None:
             return
         self._print_dialog = PrintDialog(ps, settings=self.settings, parent=self)
-        self._print_dialog.open()
+        show_print_panel(self, self._print_dialog)  # beside the view, which shows the bed preview
 
     def set_toolpaths(self, spec: dict | None) -> None:
         """Show the print preview `spec` (arapp.app.toolpaths.preview_spec) on the bed; None clears it."""

@@ -12,16 +12,18 @@ from __future__ import annotations
 from pathlib import Path
 
 from PySide6.QtCore import QStandardPaths, Signal
-from PySide6.QtWidgets import QDialog, QFileDialog, QLabel, QVBoxLayout
+from PySide6.QtWidgets import QDialog, QFileDialog, QHBoxLayout, QLabel, QPushButton, QVBoxLayout
+
+from dataclasses import replace
 
 from arapp.app import printlink
+from arapp.app.bed_fit import bed_fit, size_text
 from arapp.app.print_session import PrintSession, prune_slices
 from arapp.gui.print_widgets import (
     OTHER_PROFILE, preview_box, restore_settings, send_box, settings_values, slicing_box,
 )
 from arapp.gui.temperature_graph import TemperatureGraph
-from arapp.printing import SliceSettings
-from arapp.printing.gcode import format_duration
+from arapp.printing import SliceSettings, load_profile
 
 __all__ = ["PrintDialog", "TemperatureGraph", "prune_slices"]
 
@@ -41,6 +43,7 @@ class PrintDialog(QDialog):
     solid_ready = Signal(object)
     progress_reported = Signal(object)  # arapp.printing.link.Progress
     print_finished = Signal(object)  # the final printlink.PrintEvent
+    placement_requested = Signal(object)  # arapp.placement.Placement: "scale to fit" resized the part
 
     def __init__(self, session: PrintSession, settings=None, parent=None):
         super().__init__(parent)
@@ -55,10 +58,21 @@ class PrintDialog(QDialog):
         self._slider_before_print = 0
         lay = QVBoxLayout(self)
         name = getattr(ps.model, "name", "model")
-        self.model_label = QLabel(f"<b>{name}</b>, {ps.placement.size_mm:g} mm as placed on the anchor")
+        self.model_label = QLabel(f"<b>{name}</b>, placed {ps.placement.size_mm:g} mm at its largest")
         self.solid_label = QLabel("Preparing the printable solid...")
         lay.addWidget(self.model_label)
         lay.addWidget(self.solid_label)
+        fit_row = QHBoxLayout()
+        self.fit_label = QLabel("")
+        self.fit_label.setWordWrap(True)
+        self.fit_label.setStyleSheet("color: #b33")
+        self.fit_button = QPushButton("Scale to fit")
+        self.fit_button.clicked.connect(self.scale_to_fit)
+        fit_row.addWidget(self.fit_label, 1)
+        fit_row.addWidget(self.fit_button)
+        lay.addLayout(fit_row)
+        self._fit = None
+        self._show_fit(None)
         for box in (slicing_box(self), preview_box(self), send_box(self)):
             lay.addWidget(box)
         ev = ps.events
@@ -70,6 +84,7 @@ class PrintDialog(QDialog):
         ev.print_event.connect(self._show_print_event)
         ev.error.connect(self.error.emit)
         restore_settings(self, settings)
+        self.profile.currentIndexChanged.connect(self.check_fit)
         self.refresh_ports()
         ps.make_solid()
 
@@ -118,10 +133,47 @@ class PrintDialog(QDialog):
 
     # -- solid and slicing ---------------------------------------------------------------
     def _solid_done(self, solid) -> None:
-        x, y, z = solid.extents
-        self.solid_label.setText(f"Printable solid: {x:.1f} x {y:.1f} x {z:.1f} mm, {len(solid.faces)} triangles"
-                                 + (", watertight" if solid.is_watertight else ""))
+        self.solid_label.setText(f"Printable solid: {size_text(solid.extents)} (width x depth x height), "
+                                 f"{len(solid.faces)} triangles" + (", watertight" if solid.is_watertight else ""))
+        self.check_fit()
         self.solid_ready.emit(solid)
+
+    # -- does it fit the bed (before slicing) ----------------------------------------------
+    def check_fit(self, *_args) -> None:
+        """Compare the solid's real size with the chosen printer's bed (with the skirt); offer scale to fit."""
+        solid = self.session.solid
+        if solid is None:
+            return
+        try:
+            fit = bed_fit(solid.extents, load_profile(self.profile.currentText()), self.slice_settings())
+        except (ValueError, OSError):
+            fit = None  # an unreadable profile or setting: slicing reports it
+        self._show_fit(fit)
+
+    def _show_fit(self, fit) -> None:
+        self._fit = fit
+        too_big = fit is not None and not fit.fits
+        self.fit_label.setText(fit.text + " Slicing needs it smaller." if too_big else "")
+        self.fit_label.setVisible(too_big)
+        self.fit_button.setVisible(too_big)
+        if too_big:
+            self.fit_button.setText(f"Scale to fit ({self.session.placement.size_mm * fit.scale:.1f} mm)")
+        if hasattr(self, "slice_button") and not self.session.slicing:
+            self.slice_button.setEnabled(not too_big)
+
+    def scale_to_fit(self) -> None:
+        """Shrink the part (its placement, so the AR view shows the same) until it fits the bed."""
+        fit, ps = self._fit, self.session
+        if fit is None or fit.fits or not fit.scale > 0:
+            return
+        ps.placement = replace(ps.placement, size_mm=ps.placement.size_mm * fit.scale)
+        name = getattr(ps.model, "name", "model")
+        self.model_label.setText(f"<b>{name}</b>, placed {ps.placement.size_mm:.1f} mm at its largest")
+        self.solid_label.setText("Preparing the printable solid...")
+        self._show_fit(None)
+        self.placement_requested.emit(ps.placement)
+        ps.solid = None
+        ps.make_solid()
 
     def start_slice(self) -> None:
         try:
@@ -153,7 +205,7 @@ class PrintDialog(QDialog):
         self._slice_finished()
         self.slice_progress.setValue(1000)
         scale = f", scaled by {result.scale:.3f} to fit" if abs(result.scale - 1) > 1e-9 else ""
-        self.slice_label.setText(f"{result.layers} layers, about {format_duration(result.print_time_s)}, "
+        self.slice_label.setText(f"{result.layers} layers, about {printlink.format_duration_s(result.print_time_s)}, "
                                  f"{result.filament_mm / 1000:.2f} m of filament ({result.filament_g:.1f} g){scale}")
         self.save_button.setEnabled(True)
         self.send_button.setEnabled(not self.session.printing)
@@ -268,6 +320,7 @@ class PrintDialog(QDialog):
             return
         self.temps.clear()
         self.print_progress.setValue(0)
+        self.print_progress.setFormat("0.0 %")
         self.percent_label.setText("0.0 %")
         self.print_layer_label.setText("")
         self.eta_label.setText("")
@@ -286,8 +339,9 @@ class PrintDialog(QDialog):
         if pr is not None:
             self.print_progress.setValue(int(round(10 * max(0.0, min(100.0, pr.percent)))))
             self.percent_label.setText(f"{pr.percent:.1f} %")
+            self.print_progress.setFormat(self.percent_label.text())  # one figure: the bar says it
             self.print_layer_label.setText(printlink.layer_text(pr))
-            self.eta_label.setText(f"ETA {printlink.format_duration_s(pr.eta_s)}" if pr.eta_s is not None else "")
+            self.eta_label.setText(f"{printlink.format_duration_s(pr.eta_s)} left" if pr.eta_s is not None else "")
             self.temps.add(printlink.temperatures(pr))
             if pr.layer >= 0:
                 self._set_slider(pr.layer)  # the slider shows the printed layer (disabled meanwhile)

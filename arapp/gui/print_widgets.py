@@ -82,6 +82,12 @@ def preview_box(dlg) -> QGroupBox:
     dlg.preview_check.setEnabled(False)
     dlg.preview_check.toggled.connect(dlg.preview_toggled)
     pf.addWidget(dlg.preview_check)
+    dlg.ghost_note = QLabel("While the toolpaths stand on the bed, the model on its marker is drawn see-through.")
+    dlg.ghost_note.setWordWrap(True)
+    dlg.ghost_note.setStyleSheet("color: #555")
+    dlg.ghost_note.setVisible(False)
+    dlg.preview_check.toggled.connect(dlg.ghost_note.setVisible)
+    pf.addWidget(dlg.ghost_note)
     lrow = QHBoxLayout()
     dlg.layer_slider = QSlider(Qt.Orientation.Horizontal)
     dlg.layer_slider.setRange(0, 0)
@@ -133,12 +139,13 @@ def send_box(dlg) -> QGroupBox:
     sf.addRow(row2)
     dlg.print_progress = QProgressBar()
     dlg.print_progress.setRange(0, 1000)
-    dlg.print_progress.setFormat("%p %")
+    dlg.print_progress.setFormat("0.0 %")
     sf.addRow(dlg.print_progress)
     stats = QHBoxLayout()
     dlg.percent_label, dlg.print_layer_label, dlg.eta_label = QLabel(""), QLabel(""), QLabel("")
-    for w in (dlg.percent_label, dlg.print_layer_label, dlg.eta_label):
+    for w in (dlg.print_layer_label, dlg.eta_label):
         stats.addWidget(w, 1)
+    dlg.percent_label.setVisible(False)  # the bar shows the percent; one figure, not two that round apart
     sf.addRow(stats)
     dlg.print_label = QLabel("")
     dlg.print_label.setWordWrap(True)

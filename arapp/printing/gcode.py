@@ -72,10 +72,13 @@ def _layer_arrays(layer: LayerToolpaths, speeds: dict, area: float, accel: float
 
 
 def format_duration(seconds: float) -> str:
-    s = int(round(seconds))
-    h, rem = divmod(s, 3600)
-    m, s = divmod(rem, 60)
-    return f"{h}h {m}m {s}s" if h else f"{m}m {s}s"
+    """The one way arapp writes a duration for people: '1 h 05 min', '48 min 0 s', '40 s'."""
+    s = max(0, int(round(seconds)))
+    if s >= 3600:
+        return f"{s // 3600} h {s % 3600 // 60:02d} min"
+    if s >= 60:
+        return f"{s // 60} min {s % 60} s"
+    return f"{s} s"
 
 
 @dataclass
