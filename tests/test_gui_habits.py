@@ -295,3 +295,116 @@ def test_title_units_and_plain_words(qtbot, window, recording):
 
     words = " ".join(lbl.text() for lbl in w.tracking_panel.findChildren(QLabel))
     assert "Inliers" not in words and "Track / render" not in words
+
+
+# -- print: beside the preview, real size, fit, one format -------------------------------------------------
+def rect_in_window(w, widget):
+    from PySide6.QtCore import QRect
+
+    return QRect(widget.mapTo(w, widget.rect().topLeft()), widget.size())
+
+
+def test_print_panel_beside_the_view_with_the_solids_real_size(qtbot, window):
+    w = window
+    w.resize(1366, 768)
+    load(qtbot, w, "rational_5x5.json")
+    qtbot.keyClick(w, Qt.Key.Key_P)
+    dlg = w._print_dialog
+    assert dlg is not None and dlg.isVisible() and w.print_dock.isVisible()
+    assert not rect_in_window(w, w.print_dock).intersects(rect_in_window(w, w.view))  # the preview stays visible
+    qtbot.waitUntil(lambda: dlg.solid is not None, timeout=TIMEOUT_MS)
+    x, y, z = dlg.solid.extents
+    assert f"{x:.1f} x {y:.1f} x {z:.1f} mm" in dlg.solid_label.text()
+    assert "as placed" not in dlg.model_label.text()
+    assert not dlg.fit_button.isVisible() and dlg.slice_button.isEnabled()
+    dlg.close()
+    assert not w.print_dock.isVisible()
+
+
+def test_too_big_for_the_bed_is_caught_before_slicing_and_scaled_to_fit(qtbot, window):
+    from arapp.printing import load_profile
+
+    w = window
+    load(qtbot, w, "sphere.json")
+    w.model_panel.size.setValue(400.0)
+    w.open_print_dialog()
+    dlg = w._print_dialog
+    qtbot.waitUntil(lambda: dlg.solid is not None, timeout=TIMEOUT_MS)
+    assert dlg.fit_button.isVisible() and not dlg.slice_button.isEnabled()
+    assert "larger than the bed" in dlg.fit_label.text() and "--" not in dlg.fit_label.text()  # no CLI flags
+    dlg.fit_button.click()
+    qtbot.waitUntil(lambda: dlg.solid is not None, timeout=TIMEOUT_MS)
+    bed = load_profile(dlg.profile.currentText()).bed
+    ext = dlg.solid.extents
+    assert ext[0] <= bed.width and ext[1] <= bed.depth and ext[2] <= bed.height
+    assert max(ext) > 0.9 * min(bed.width, bed.depth, bed.height) - 20  # shrunk to fit, not to nothing
+    assert w.placement.size_mm == pytest.approx(dlg.placement.size_mm)  # the AR view shows what is printed
+    assert not dlg.fit_button.isVisible() and dlg.slice_button.isEnabled()
+    dlg.close()
+
+
+def test_one_time_format():
+    from arapp.app.printlink import format_duration_s
+    from arapp.printing.gcode import format_duration
+
+    assert format_duration(48 * 60) == "48 min 0 s" and format_duration_s(48 * 60) == "48 min 0 s"
+    assert format_duration_s(6 * 60 + 19) == "6 min 19 s"
+    assert format_duration(3 * 3600 + 5 * 60 + 9) == "3 h 05 min" and format_duration_s(None) == "?"
+
+
+def test_temperature_graph_has_a_time_axis_and_readings_off_the_lines(qtbot):
+    from PySide6.QtGui import QColor, QImage
+
+    from arapp.gui.temperature_graph import TemperatureGraph, time_ticks
+
+    g = TemperatureGraph()
+    qtbot.addWidget(g)
+    g.resize(420, 150)
+    for k in range(121):  # two minutes at the target: the target line and the readings' row
+        g.add({"hotend": (200.0, 200.0), "bed": (60.0, 60.0)}, t=float(k))
+    img = g.grab().toImage().convertToFormat(QImage.Format.Format_RGB888)
+    arr = np.frombuffer(img.constBits(), np.uint8).reshape(img.height(), img.bytesPerLine())[:, : 3 * img.width()]
+    arr = arr.reshape(img.height(), img.width(), 3).astype(int)
+    hot = QColor(TemperatureGraph.SERIES["hotend"])
+    near = np.abs(arr - [hot.red(), hot.green(), hot.blue()]).max(axis=2) < 40
+    rows = np.nonzero(near[:, TemperatureGraph.LEFT + 150:].any(axis=1))[0]  # right of the readings' text
+    line_y = TemperatureGraph.TOP + (150 - TemperatureGraph.TOP - TemperatureGraph.BOTTOM) * (1 - 200 / (200 * 1.1))
+    assert rows.size and abs(rows.mean() - line_y) < 3  # the hotend lines lie where 200 °C is ...
+    assert rows.min() > TemperatureGraph.TOP  # ... below the readings, not under them
+    bottom = arr[150 - TemperatureGraph.BOTTOM + 2:, TemperatureGraph.LEFT:]
+    assert (np.abs(bottom - 250).max(axis=2) > 60).sum() > 30  # the time axis labels are drawn
+    assert [t for t, _ in time_ticks(120.0)] == [0.0, 30.0, 60.0, 90.0, 120.0]
+    assert time_ticks(300.0)[-1] == (300.0, "-5 min")
+
+
+def test_bed_preview_draws_the_model_as_a_ghost():
+    from arapp.app.session import GHOST_MODE, Session, read_model
+
+    sent = []
+
+    class Engine:
+        running = playing = False
+
+        def send(self, c):
+            sent.append(c)
+
+        def start(self):
+            pass
+
+        def stop(self, wait=0.0):
+            pass
+
+    s = Session(lambda *a, **k: Engine())
+    notes = []
+    s.events.status.connect(lambda text, ms: notes.append(text))
+    s.open_source("recording-that-is-never-read")
+    model, mesh_lines = read_model(str(MODELS / "sphere.json"))
+    s.set_model(model, mesh_lines, str(MODELS / "sphere.json"))
+    assert sent[-1].mode == "shaded"
+    s.set_toolpaths({"gcode_path": "x.gcode"})
+    modes = [c.mode for c in sent if type(c).__name__ == "SetMode"]
+    assert modes[-1] == GHOST_MODE and any("see-through" in n for n in notes)
+    s.edit_control_point(0, 1, 1, tuple(model.surfaces[0].control_points[1, 1]), 2.0)
+    assert [c for c in sent if type(c).__name__ == "SetModel"][-1].mode == GHOST_MODE  # an edit keeps the ghost
+    s.set_toolpaths(None)
+    assert [c.mode for c in sent if type(c).__name__ == "SetMode"][-1] == "shaded"
