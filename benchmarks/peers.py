@@ -19,6 +19,8 @@ import time
 import cv2
 import numpy as np
 
+from tracking.anchors.dictionaries import aruco_dictionary
+
 
 def _qr_calls() -> dict:
     """name -> (make detector, call(detector, gray) -> [(text, corners (4, 2))])."""
@@ -97,12 +99,11 @@ class PlainPeer:
         p.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
         self.det = {}
         for m in self.models:
-            if m.kind != "qr" and m.spec.dictionary_id not in self.det:
-                self.det[m.spec.dictionary_id] = cv2.aruco.ArucoDetector(
-                    cv2.aruco.getPredefinedDictionary(m.spec.dictionary_id), p)
+            if m.anchor_kind.detector != "qr" and m.spec.dictionary_id not in self.det:
+                self.det[m.spec.dictionary_id] = cv2.aruco.ArucoDetector(aruco_dictionary(m.spec.dictionary), p)
         self.qr_call = qr_call
         make, self._qr = QR_CALLS[qr_call]
-        self.qr = make() if any(m.kind == "qr" for m in self.models) else None
+        self.qr = make() if any(m.anchor_kind.detector == "qr" for m in self.models) else None
 
     def pose(self, image: np.ndarray) -> np.ndarray | None:
         from tracking.anchors.model import square_corners
@@ -116,13 +117,13 @@ class PlainPeer:
                 continue
             for c, mid in zip(corners, ids.ravel()):
                 for m in self.models:
-                    if m.kind != "qr" and m.spec.dictionary_id == d and int(mid) in m.markers:
+                    if m.anchor_kind.detector != "qr" and m.spec.dictionary_id == d and int(mid) in m.markers:
                         obj.append(m.to_world(m.markers[int(mid)]))
                         img.append(c.reshape(4, 2))
         if self.qr is not None:
             for text, p in self._qr(self.qr, gray):
                 for m in self.models:
-                    if m.kind == "qr" and m.spec.text == text:
+                    if m.anchor_kind.detector == "qr" and m.spec.text == text:
                         obj.append(m.to_world(square_corners(m.spec.length)))
                         img.append(p)
         if not obj:

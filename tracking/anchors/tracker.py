@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from tracking.anchors.dictionaries import aruco_dictionary
 from tracking.anchors.detect import ArucoDetection, Observation, detector_parameters
 from tracking.anchors.edges import edge_sharpness
 from tracking.anchors.filter import PoseFilter
@@ -229,7 +230,7 @@ class AnchorTracker:
             res.anchors_seen = sol.anchors
             self.last_raw = raw
             self.tracked_keys = {(ob.anchor, int(g)) for ob in obs if ob.anchor in sol.anchors
-                                 and self.models[ob.anchor].kind in ("aruco", "aruco_board") for g in np.unique(ob.groups)}
+                                 and self.models[ob.anchor].anchor_kind.detector == "aruco" for g in np.unique(ob.groups)}
         else:
             self.tracked_keys = set()
         res.rejected = rejected
@@ -295,7 +296,7 @@ class AnchorTracker:
             m = self.models[ob.anchor]
             # lone markers only: a board's corners come from a marker family drawn on one sheet (thin
             # margins between them, and its other markers outvote a covered one in the fit)
-            if m.kind != "aruco" or len(ob.img) != 4:
+            if not m.anchor_kind.single_square or m.anchor_kind.detector != "aruco" or len(ob.img) != 4:
                 good += len(ob.img) // 4
                 continue
             bits = self.aruco.bits[m.spec.dictionary_id]
@@ -387,10 +388,9 @@ class _Plain:
         params = detector_parameters()
         self.det = {}
         for m in self.models:
-            if m.kind != "qr" and m.spec.dictionary_id not in self.det:
-                self.det[m.spec.dictionary_id] = cv2.aruco.ArucoDetector(
-                    cv2.aruco.getPredefinedDictionary(m.spec.dictionary_id), params)
-        self.qr = cv2.QRCodeDetector() if any(m.kind == "qr" for m in self.models) else None
+            if m.anchor_kind.detector != "qr" and m.spec.dictionary_id not in self.det:
+                self.det[m.spec.dictionary_id] = cv2.aruco.ArucoDetector(aruco_dictionary(m.spec.dictionary), params)
+        self.qr = cv2.QRCodeDetector() if any(m.anchor_kind.detector == "qr" for m in self.models) else None
 
 
 _PLAIN_CACHE: dict = {}
@@ -416,7 +416,7 @@ def plain_opencv_pose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarr
             continue
         for c, mid in zip(corners, ids.ravel()):
             for m in plain.models:
-                if m.kind != "qr" and m.spec.dictionary_id == d and int(mid) in m.markers:
+                if m.anchor_kind.detector != "qr" and m.spec.dictionary_id == d and int(mid) in m.markers:
                     obj.append(m.to_world(m.markers[int(mid)]))
                     img.append(c.reshape(4, 2))
     if plain.qr is not None:
@@ -424,7 +424,7 @@ def plain_opencv_pose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarr
         if ok:
             for text, p in zip(texts, points):
                 for m in plain.models:
-                    if m.kind == "qr" and m.spec.text == text:
+                    if m.anchor_kind.detector == "qr" and m.spec.text == text:
                         obj.append(m.to_world(square_corners(m.spec.length)))
                         img.append(p.reshape(4, 2))
     if not obj:
