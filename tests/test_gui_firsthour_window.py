@@ -25,10 +25,6 @@ def window(qtbot, tmp_path, config_dir, monkeypatch):
     from arapp.gui.main_window import MainWindow
 
     w = MainWindow(settings=QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat))
-    if not hasattr(w, "first_hour"):
-        from arapp.gui.first_hour import install
-
-        install(w)
     qtbot.addWidget(w)
     w.show()
     yield w
@@ -125,9 +121,6 @@ from PySide6.QtWidgets import QApplication
 app = QApplication(sys.argv[:1])
 from arapp.gui.main_window import MainWindow
 w = MainWindow(settings=QSettings(sys.argv[1], QSettings.Format.IniFormat))
-if not hasattr(w, "first_hour"):
-    from arapp.gui.first_hour import install
-    install(w)
 w.show()
 loop = QEventLoop(); QTimer.singleShot(1500, loop.quit); loop.exec()
 def rect(widget):

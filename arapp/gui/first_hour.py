@@ -13,7 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from PySide6.QtCore import Qt
-from PySide6.QtGui import QAction
+from PySide6.QtGui import QAction, QGuiApplication
 from PySide6.QtWidgets import QDockWidget, QMenu, QScrollArea
 
 from tracking.default_intrinsics import is_estimated
@@ -41,7 +41,9 @@ def fit_to_screen(window) -> None:
         area.setMinimumWidth(inner.minimumSizeHint().width() + area.verticalScrollBar().sizeHint().width())
         dock.setWidget(area)
     screen = window.screen()
-    if screen is not None:
+    # Qt's offscreen platform has no real screen (800x600 by default): keep the designed size there, so
+    # pictures made headless (--screenshot) look as on a desktop
+    if screen is not None and QGuiApplication.platformName() != "offscreen":
         avail = screen.availableGeometry()
         w, h = min(window.width(), avail.width()), min(window.height(), avail.height() - 40)  # 40: title bar
         window.resize(w, h)

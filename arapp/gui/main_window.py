@@ -22,6 +22,7 @@ from arapp.app.editing import library_thumbnails
 from arapp.app.paint_stats import PaintStats
 from arapp.app.session import Session, as_bool
 from arapp.gui.errors import ErrorBoxes
+from arapp.gui.first_hour import install as install_first_hour
 from arapp.gui.habits import install_habits
 from arapp.gui.menus import build_menus, update_recent_menus
 from arapp.gui.panels.model import MODEL_FILTER, ModelPanel, library_files
@@ -74,6 +75,7 @@ class MainWindow(QMainWindow):
         self._status_timer.timeout.connect(self._refresh_status)
         self._status_timer.start()
         install_habits(self)  # undo/redo, export, screenshot, AR video, title, controls enabled when they can act
+        install_first_hour(self)  # welcome, calibration banner and wizard, lost hint, printer set-up, Help; fits the screen
         install_scan(self)  # scan mode: the Scan dock and the dome of view directions over the view
         QTimer.singleShot(0, self._start_thumbnails)
         QTimer.singleShot(0, self.freeze_heap)

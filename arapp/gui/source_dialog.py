@@ -34,22 +34,20 @@ def ask_video(parent) -> tuple[str, str | None] | None:
                                            "Videos (*.mp4 *.mkv *.avi *.mov *.webm);;All files (*)")
     if not video:
         return None
-    calib, _ = QFileDialog.getOpenFileName(parent, "Its camera calibration (OpenCV YAML)", str(Path(video).parent),
+    calib, _ = QFileDialog.getOpenFileName(parent, "Its camera calibration (OpenCV YAML; Cancel: estimate it)",
+                                           str(Path(video).parent),
                                            "Calibration (*.yaml *.yml *.json);;All files (*)")
     return video, calib or None
 
+
 def ask_video_spec(parent, report) -> str | None:
-    """Ask for a video and its calibration: the source spec, or None when cancelled or (told to
-    `report(title, message)`) when no calibration was chosen."""
+    """Ask for a video and its calibration: the source spec, or None when cancelled. Without a calibration
+    the video opens with a stored or estimated camera (arapp.camera_store); `report` is kept for callers."""
     chosen = ask_video(parent)
     if chosen is None:
         return None
     video, calib = chosen
-    if not calib:
-        report("Calibration needed", f"{video}: tracking needs the camera's calibration; "
-               "choose the YAML written by 'arapp calibrate' or OpenCV's calibration tools")
-        return None
-    return sourcespec.video_spec(video, calib)
+    return sourcespec.video_spec(video, calib)  # no calibration: a stored or estimated one (camera_store)
 
 
 class SourceDialog(QDialog):
@@ -148,7 +146,4 @@ class SourceDialog(QDialog):
         if chosen is None:
             return
         video, calib = chosen
-        if calib:
-            self._choose(sourcespec.video_spec(video, calib))
-        else:
-            self.status.setText("A video needs its camera calibration for tracking (YAML from 'arapp calibrate').")
+        self._choose(sourcespec.video_spec(video, calib))  # no calibration: a stored or estimated one
