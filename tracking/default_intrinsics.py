@@ -36,7 +36,8 @@ def estimated_camera(width: int, height: int, hfov_deg: float = DEFAULT_HFOV_DEG
     """A pinhole Camera for a `width` x `height` image (pixels) whose horizontal field of view is
     `hfov_deg` degrees: fx = fy = (width / 2) / tan(hfov / 2), principal point at the image centre,
     zero distortion."""
-    if not (isinstance(width, (int, np.integer)) and isinstance(height, (int, np.integer))) or width <= 0 or height <= 0:
+    integers = isinstance(width, (int, np.integer)) and isinstance(height, (int, np.integer))
+    if not integers or width <= 0 or height <= 0:
         raise CalibrationError(f"an estimated camera needs a positive integer image size, got {width}x{height}")
     if not 1.0 <= float(hfov_deg) <= 170.0:
         raise CalibrationError(f"horizontal field of view {hfov_deg} deg: use a value between 1 and 170 degrees")

@@ -75,7 +75,7 @@ class MainWindow(QMainWindow):
         self._status_timer.timeout.connect(self._refresh_status)
         self._status_timer.start()
         install_habits(self)  # undo/redo, export, screenshot, AR video, title, controls enabled when they can act
-        install_first_hour(self)  # welcome, calibration banner and wizard, lost hint, printer set-up, Help; fits the screen
+        install_first_hour(self)  # welcome, calibration banner + wizard, lost hint, printer set-up, Help
         install_scan(self)  # scan mode: the Scan dock and the dome of view directions over the view
         QTimer.singleShot(0, self._start_thumbnails)
         QTimer.singleShot(0, self.freeze_heap)
