@@ -60,8 +60,9 @@ class PrintDialog(QDialog):
         name = getattr(ps.model, "name", "model")
         self.model_label = QLabel(f"<b>{name}</b>, placed {ps.placement.size_mm:g} mm at its largest")
         self.solid_label = QLabel("Preparing the printable solid...")
-        lay.addWidget(self.model_label)
-        lay.addWidget(self.solid_label)
+        for label in (self.model_label, self.solid_label):
+            label.setWordWrap(True)  # the dialog lives in a side panel: long lines wrap, not widen it
+            lay.addWidget(label)
         fit_row = QHBoxLayout()
         self.fit_label = QLabel("")
         self.fit_label.setWordWrap(True)

@@ -7,7 +7,7 @@ from __future__ import annotations
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QDockWidget, QScrollArea
 
-PANEL_WIDTH = 430  # px: the print widgets' natural width (the bed-preview layer row) without a scroll bar
+MAX_SHARE = 0.45  # of the window's width at most: the AR view keeps the larger part
 
 
 def show_print_panel(window, dlg) -> QDockWidget:
@@ -36,7 +36,10 @@ def show_print_panel(window, dlg) -> QDockWidget:
     model_dock = window.findChild(QDockWidget, "dock_model")
     if model_dock is not None and window.dockWidgetArea(model_dock) == Qt.DockWidgetArea.RightDockWidgetArea:
         window.tabifyDockWidget(model_dock, dock)
-    window.resizeDocks([dock], [PANEL_WIDTH], Qt.Orientation.Horizontal)
+    # as wide as the print widgets want (no sideways scrolling), but never most of the window
+    want = max(dlg.sizeHint().width(), dlg.minimumSizeHint().width()) + scroll.verticalScrollBar().sizeHint().width() + 8
+    width = int(min(want, MAX_SHARE * window.width()))
+    scroll.setMinimumWidth(width)  # resizeDocks does not widen a tabbed dock; its minimum does
     dlg.finished.connect(lambda _r: dock.close())
     dlg.placement_requested.connect(window.session.set_placement)
     dlg.show()
