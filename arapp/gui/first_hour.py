@@ -38,7 +38,9 @@ def fit_to_screen(window) -> None:
         area.setWidgetResizable(True)
         area.setFrameShape(QScrollArea.Shape.NoFrame)
         area.setWidget(inner)
-        area.setMinimumWidth(inner.minimumSizeHint().width() + area.verticalScrollBar().sizeHint().width())
+        # as wide as the panel likes to be (its fields and buttons unclipped), only its height scrolls
+        area.setMinimumWidth(max(inner.minimumSizeHint().width(), min(inner.sizeHint().width(), 460))
+                             + area.verticalScrollBar().sizeHint().width())
         dock.setWidget(area)
     screen = window.screen()
     # Qt's offscreen platform has no real screen (800x600 by default): keep the designed size there, so
