@@ -408,3 +408,13 @@ def test_bed_preview_draws_the_model_as_a_ghost():
     assert [c for c in sent if type(c).__name__ == "SetModel"][-1].mode == GHOST_MODE  # an edit keeps the ghost
     s.set_toolpaths(None)
     assert [c.mode for c in sent if type(c).__name__ == "SetMode"][-1] == "shaded"
+
+
+def test_anchors_editor_says_its_lengths_in_mm(qtbot):
+    from arapp.gui.panels.tracking import AnchorsDialog
+
+    d = AnchorsDialog([{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 40, "length": 0.05}])
+    qtbot.addWidget(d)
+    assert "50 mm" in d.in_mm.text() and "40" in d.in_mm.text()
+    d.text.setPlainText('[{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 3, "length": 0.12}]')
+    assert "120 mm" in d.in_mm.text()

@@ -121,10 +121,14 @@ class AnchorsDialog(QDialog):
         self.setWindowTitle("Anchors")
         self.resize(520, 420)
         lay = QVBoxLayout(self)
-        lay.addWidget(QLabel("Anchors as in session.json (metres; see docs/recording-format.md). "
-                             "Used for live cameras and videos without a session."))
+        lay.addWidget(QLabel("Anchors as in session.json: lengths in metres there (0.05 is 50 mm; see "
+                             "docs/recording-format.md). Used for live cameras and videos without a session."))
         self.text = QPlainTextEdit(json.dumps(anchors_json, indent=2))
         lay.addWidget(self.text, 1)
+        self.in_mm = QLabel("")  # what the text means, in millimetres, as it is typed
+        self.in_mm.setWordWrap(True)
+        lay.addWidget(self.in_mm)
+        self.text.textChanged.connect(self._describe)
         self.problem = QLabel("")
         self.problem.setStyleSheet("color: #c33")
         self.problem.setWordWrap(True)
@@ -134,6 +138,15 @@ class AnchorsDialog(QDialog):
         buttons.rejected.connect(self.reject)
         lay.addWidget(buttons)
         self.anchors_json = anchors_json
+        self._describe()
+
+    def _describe(self) -> None:
+        try:
+            anchors = parse_anchors(json.loads(self.text.toPlainText()))
+        except (ValueError, TypeError, KeyError):
+            self.in_mm.setText("")
+            return
+        self.in_mm.setText("In millimetres: " + "; ".join(a.anchor_kind.describe(a) for a in anchors))
 
     def _accept(self) -> None:
         try:
