@@ -21,11 +21,10 @@ N_FRAMES = 40
 
 @pytest.fixture(scope="module")
 def vase_recording(tmp_path_factory):
-    from arapp.scan.synthetic import write_vase_recording
+    from arapp.scan.synthetic import vase_truth
+    from test_scan_session import shared_vase_recording
 
-    folder = tmp_path_factory.mktemp("gui_scan") / "vase"
-    truth = write_vase_recording(folder, n_frames=N_FRAMES, seed=5)   # not the benchmark's scene (seed 7)
-    return folder, truth
+    return shared_vase_recording(tmp_path_factory), vase_truth()
 
 
 def test_scan_fills_the_dome_and_the_mesh_becomes_the_model(qtbot, tmp_path, vase_recording):
