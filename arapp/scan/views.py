@@ -14,8 +14,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
+import warnings
+
 import cv2
 import numpy as np
+
+from tracking.sources import SourceWarning
 
 
 class ScanCancelled(Exception):
@@ -63,31 +67,36 @@ def track_views(source, camera, anchors, progress: Callable[[str, int, int], Non
         total = min(total, max_frames) if total else max_frames
     views: list[View] = []
     n = 0
-    try:
-        for frame in source:
-            if cancel is not None and cancel.is_set():
-                raise ScanCancelled()
-            if max_frames is not None and n >= max_frames:
-                break
-            n += 1
-            res = tracker.process(frame.image, frame.t)
-            if progress is not None:
-                progress("tracking", n, total)
-            if res.world_from_camera is None or res.state != "marker" or (n - 1) % every:
-                continue
-            img = frame.image if maps is None else cv2.remap(frame.image, maps[0], maps[1], cv2.INTER_LINEAR)
-            depth = getattr(frame, "depth", None)
-            if depth is not None and maps is not None:
-                # nearest, not linear: blending depths across an occluding edge invents surfaces
-                depth = cv2.remap(depth, maps[0], maps[1], cv2.INTER_NEAREST)
-            gray = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
-            views.append(View(frame.index, frame.t, img, np.array(res.world_from_camera, float), sharpness(gray),
-                              depth))
-    finally:
-        tracker.close()
+    # a source's early end is warned from inside the loop; held here, it becomes the scan's one error line
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", SourceWarning)
+        try:
+            for frame in source:
+                if cancel is not None and cancel.is_set():
+                    raise ScanCancelled()
+                if max_frames is not None and n >= max_frames:
+                    break
+                n += 1
+                res = tracker.process(frame.image, frame.t)
+                if progress is not None:
+                    progress("tracking", n, total)
+                if res.world_from_camera is None or res.state != "marker" or (n - 1) % every:
+                    continue
+                img = frame.image if maps is None else cv2.remap(frame.image, maps[0], maps[1], cv2.INTER_LINEAR)
+                depth = getattr(frame, "depth", None)
+                if depth is not None and maps is not None:
+                    # nearest, not linear: blending depths across an occluding edge invents surfaces
+                    depth = cv2.remap(depth, maps[0], maps[1], cv2.INTER_NEAREST)
+                gray = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+                views.append(View(frame.index, frame.t, img, np.array(res.world_from_camera, float), sharpness(gray),
+                                  depth))
+        finally:
+            tracker.close()
     error = getattr(source, "error", None)
     if error and error != getattr(source, "notice", None) and not getattr(source, "live", False):
         raise RuntimeError(f"{error}; nothing was scanned")
+    for w in caught:   # not an error for the scan (a live camera's end): passed on as they came
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     return views
 
 
