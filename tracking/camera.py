@@ -18,12 +18,18 @@ from tracking.errors import CalibrationError
 
 @dataclass
 class Camera:
-    """Intrinsics `K` (3x3), distortion `dist` (OpenCV order k1 k2 p1 p2 [k3 ...]), image size in pixels."""
+    """Intrinsics `K` (3x3), distortion `dist` (OpenCV order k1 k2 p1 p2 [k3 ...]), image size in pixels.
+
+    `readout` (optional, seconds): a rolling shutter's readout time, top row to bottom row; a frame's
+    timestamp is its centre row's time (row y is read at t + readout * ((y + 0.5) / height - 0.5)).
+    0 = a global shutter or unknown.
+    """
 
     K: np.ndarray
     dist: np.ndarray
     width: int
     height: int
+    readout: float = 0.0
     _maps: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -40,6 +46,9 @@ class Camera:
             raise CalibrationError(f"image size must be positive, got {self.width}x{self.height}")
         if not np.all(np.isfinite(self.K)) or self.K[0, 0] <= 0 or self.K[1, 1] <= 0:
             raise CalibrationError(f"camera matrix must have positive finite fx, fy; got {self.K.tolist()}")
+        self.readout = float(self.readout or 0.0)
+        if not (0.0 <= self.readout < 1.0):
+            raise CalibrationError(f"rolling-shutter readout must be 0 <= readout < 1 seconds, got {self.readout}")
 
     # -- accessors -----------------------------------------------------------
     @property
@@ -132,12 +141,15 @@ class Camera:
         K[1, 1] *= sy
         K[0, 2] = (K[0, 2] + 0.5) * sx - 0.5
         K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
-        return Camera(K, self.dist.copy(), width, height)
+        return Camera(K, self.dist.copy(), width, height, self.readout)
 
     # -- files -----------------------------------------------------------------
     def to_dict(self) -> dict:
         """The `camera` block of session.json."""
-        return {"width": self.width, "height": self.height, "K": self.K.tolist(), "dist": self.dist.tolist()}
+        d = {"width": self.width, "height": self.height, "K": self.K.tolist(), "dist": self.dist.tolist()}
+        if self.readout > 0:
+            d["readout"] = self.readout
+        return d
 
     @classmethod
     def from_dict(cls, d: dict, where: str = "camera") -> "Camera":
@@ -160,8 +172,12 @@ class Camera:
         for key in ("width", "height"):
             if not isinstance(d[key], int) or isinstance(d[key], bool) or d[key] <= 0:
                 raise CalibrationError(f"{where}.{key}: must be a positive integer, got {d[key]!r}")
+        readout = d.get("readout", 0.0)
+        if not isinstance(readout, (int, float)) or isinstance(readout, bool) or not 0 <= readout < 1:
+            raise CalibrationError(f"{where}.readout: must be a rolling-shutter readout time in seconds "
+                                   f"(0 <= readout < 1, e.g. 0.03), got {readout!r}")
         try:
-            return cls(K, dist, d["width"], d["height"])
+            return cls(K, dist, d["width"], d["height"], float(readout))
         except CalibrationError as e:
             raise CalibrationError(f"{where}: {e}") from None
 

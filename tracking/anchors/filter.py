@@ -112,9 +112,15 @@ class PoseFilter:
         self.R = _exp(a * e_r) @ pred[:3, :3]
         self.n += 1
         if self.n == 1:
-            # second measurement: start the velocity from the finite difference instead of from rest
-            self.v, self.w = e_p / dt, e_r / dt
-            self.p, self.R = pm.copy(), Rm.copy()
+            # second measurement: start the velocity from the finite difference instead of from rest,
+            # shrunk by how much of that difference the two measurements' noise (variance 2 sigma^2)
+            # explains (Wiener: signal^2 / (signal^2 + noise^2)); a still camera's noisy pair must not
+            # fling the first frames off, while a precise measurement's difference is taken as it is
+            k = 1.0 if sigma is None or m <= 0 else max(0.0, 1.0 - 2.0 * float(sigma) ** 2 / (m * m))
+            a0 = max(0.5, k)   # with no motion to follow, the mean of the two is the best position
+            self.v, self.w = k * e_p / dt, k * e_r / dt
+            self.p = pred[:3, 3] + a0 * e_p
+            self.R = _exp(a0 * e_r) @ pred[:3, :3]
         else:
             self.v = self.v + (b / dt) * e_p
             self.w = self.w + (b / dt) * e_r

@@ -119,6 +119,9 @@ class AnchorTracker:
         self.qr.reset()
         self.frame = 0
         self.last_raw: np.ndarray | None = None
+        self._last_pts: dict = {}      # (anchor, object point key) -> last frame's detected pixel
+        self._last_pts_t: float | None = None
+        self._prev_pts: tuple = ({}, None)
         self.branch_evidence = 0.0
         self._alternative = None
         self.tracked_keys: set[tuple[int, int]] = set()
@@ -188,6 +191,7 @@ class AnchorTracker:
         obs, rejected = self._screen_new(aruco_obs + qr_obs, ref_cfw)
         fast = self._moving_fast(pred_cfw)
         obs, covered = self._drop_covered(gray, obs, fast)
+        obs = self._deskew(obs, t)
         sol = solve_pose(obs, self.world_from_anchor, self.camera, pred_cfw, outlier_px=self.outlier_px)
         if self._tracked_only and (sol is None or sol.rms > self.track_max_rms
                                    or len(sol.world) < 0.8 * sum(len(o.obj) for o in obs)):
@@ -195,6 +199,7 @@ class AnchorTracker:
             self.tracked_keys = set()
             obs, rejected = self._screen_new(self._detect_aruco(gray, pred_cfw) + qr_obs, ref_cfw)
             obs, covered = self._drop_covered(gray, obs, fast)
+            obs = self._deskew(obs, t)
             sol = solve_pose(obs, self.world_from_anchor, self.camera, pred_cfw, outlier_px=self.outlier_px)
         if sol is not None and pred_cfw is not None and self._other_branch_wins(obs, sol):
             # the image has favoured the other IPPE branch for a while: the branch kept so far was the wrong
@@ -236,6 +241,46 @@ class AnchorTracker:
         res.rejected = rejected
         res.ms = (time.perf_counter() - t0) * 1000.0
         return res
+
+    def _deskew(self, obs: list[Observation], t: float) -> list[Observation]:
+        """Move each detected point to where it would be at the frame's centre-row time, for a camera
+        with a rolling shutter (`camera.readout` seconds, top row to bottom row).
+
+        Row y is read `d = readout * ((y + 0.5) / height - 0.5)` seconds from the frame time; a point
+        moving across the image at u' pixels/s was seen `u' d` from where the centre row would have
+        seen it. u' is the point's own image velocity since the last frame (its detections in both
+        frames), fitted as an affine field over the anchor's points: far less noisy than a velocity
+        from two poses, whose tilt noise barely moves the image. First order in d; points of an anchor
+        not seen in the last frame are left as they are. Also remembers this frame's points.
+        """
+        cam = self.camera
+        if cam.readout <= 0:
+            return obs
+        if self._last_pts_t != t:   # (a second detection pass of the same frame compares with the last frame too)
+            self._prev_pts = (self._last_pts, self._last_pts_t)
+        prev, prev_t = self._prev_pts
+        self._last_pts = {(ob.anchor, *np.round(o * 1e5).astype(int)): px
+                          for ob in obs for o, px in zip(ob.obj, ob.img)}
+        self._last_pts_t = t
+        dt = t - prev_t if prev_t is not None else 0.0
+        if not prev or not 0 < dt <= 0.1:
+            return obs
+        out = []
+        for ob in obs:
+            keys = [(ob.anchor, *np.round(o * 1e5).astype(int)) for o in ob.obj]
+            seen = np.array([k in prev for k in keys])
+            if seen.sum() < 3:
+                out.append(ob)
+                continue
+            img = np.asarray(ob.img, float)
+            vel = (img[seen] - np.array([prev[k] for k, s in zip(keys, seen) if s])) / dt
+            X = np.c_[img[seen], np.ones(int(seen.sum()))]
+            A, *_ = np.linalg.lstsq(X, vel, rcond=None)
+            vel_all = np.c_[img, np.ones(len(img))] @ A
+            d = cam.readout * ((img[:, 1] + 0.5) / cam.height - 0.5)
+            out.append(Observation(ob.anchor, ob.obj, img - vel_all * d[:, None], ob.groups, ob.markers,
+                                   square=ob.square))
+        return out
 
     def _screen_new(self, obs: list[Observation], ref_cfw: np.ndarray | None) -> tuple[list[Observation], list[int]]:
         """Leave out observations of anchors never trusted in this session whose corners are far from

@@ -121,6 +121,67 @@ def _webcam(**kw) -> dict:
     return fx
 
 
+# Tuning twins of the test recordings: the same kinds of webcam effects and motions, from other seeds
+# (scene 301-304, desk 401-404) and other geometry. They are tuning data: looked at freely while
+# choosing parameters, so that the test recordings above never have to be.
+TUNING_TWINS: dict[str, dict] = {
+    # A single 5 cm marker at ~0.42 m; fingertips come from the other side onto its white border.
+    "tune_hand_border": {
+        "name": "tune_hand_border", "seed": 301, "fps": 30, "duration": 2.5,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 63, "dist": [-0.07, 0.035, -0.0003, 0.0004, 0.0]},
+        "anchors": [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 11, "length": 0.05}],
+        "desk": {"size": [1.4, 1.1], "ppm": 2000, "seed": 401},
+        "trajectory": {"kind": "orbit", "azimuth_start": -78, "azimuth_end": -96, "distance": 0.42,
+                       "elevation": 60, "shake": {"pos_mm": 1.8, "rot_deg": 0.3, "freq_hz": 1.7}},
+        "effects": _webcam(occluder={"start": 0.5, "end": 2.0, "ramp": 0.5, "style": "border", "approach_deg": 170,
+                                     "reach": 0.015, "offset": 0.01}),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
+    # A 4x4 GridBoard (36h12, 3.5 cm markers): over-exposed start, focus hunting, noisy sensor.
+    "tune_webcam_board": {
+        "name": "tune_webcam_board", "seed": 302, "fps": 30, "duration": 2.5,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 64, "dist": [-0.09, 0.05, 0.0005, -0.0004, 0.0]},
+        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_ARUCO_MIP_36h12", "markers_x": 4, "markers_y": 4,
+                     "marker_length": 0.035, "separation": 0.007, "first_id": 4}],
+        "desk": {"size": [1.5, 1.2], "ppm": 2000, "seed": 402},
+        "trajectory": {"kind": "orbit", "azimuth_start": -120, "azimuth_end": -70, "distance": 0.46,
+                       "elevation": 59, "elevation_swing": 5, "shake": {"pos_mm": 2.2, "rot_deg": 0.3, "freq_hz": 1.8}},
+        "effects": _webcam(sensor={"full_well": 2200, "read_noise": 2.0}, rolling_shutter=0.028,
+                           auto_exposure={"target": 112, "speed": 0.13, "initial_gain": 1.6},
+                           defocus={"radius": 0.7, "swing": 0.5, "period": 1.6}),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
+    # A QR code on a webcam, hand-held orbit at ~0.38 m.
+    "tune_qr_webcam": {
+        "name": "tune_qr_webcam", "seed": 303, "fps": 30, "duration": 2.5,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 60, "dist": [-0.06, 0.025, 0.0002, -0.0002, 0.0]},
+        "anchors": [{"kind": "qr", "text": "arapp tuning anchor 3", "length": 0.07}],
+        "desk": {"size": [1.4, 1.1], "ppm": 2000, "seed": 403},
+        "trajectory": {"kind": "orbit", "azimuth_start": -105, "azimuth_end": -72, "distance": 0.38,
+                       "elevation": 61, "shake": {"pos_mm": 2.2, "rot_deg": 0.3, "freq_hz": 2.0}},
+        "effects": _webcam(),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
+    # Fast pans over a 5x3 GridBoard: motion blur along the true motion, rolling-shutter skew.
+    "tune_fast_pan": {
+        "name": "tune_fast_pan", "seed": 304, "fps": 30, "duration": 2.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 61, "dist": [-0.07, 0.03, -0.0004, 0.0005, 0.0]},
+        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 5, "markers_y": 3,
+                     "marker_length": 0.032, "separation": 0.008, "first_id": 20}],
+        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": 404},
+        "trajectory": {"kind": "pan", "azimuth": -85, "distance": 0.5, "elevation": 58, "pan_deg": 22,
+                       "cycles": 1.5, "shake": {"pos_mm": 2.8, "rot_deg": 0.55, "freq_hz": 2.8}},
+        "effects": _webcam(motion_blur=0.6, blur_samples=7, rolling_shutter=0.03),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
+}
+PRESETS.update(TUNING_TWINS)
+
+
 TEST_PRESETS: dict[str, dict] = {
     # A single 6 cm marker seen from ~0.45 m; a hand's fingertips slide onto its white border (one
     # finger onto the black edge near a corner) from 0.6 s to 2.4 s and leave.
