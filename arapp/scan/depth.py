@@ -113,7 +113,7 @@ def stereo_depth(img_a, img_b, K, pose_a, pose_b, z_range: tuple[float, float], 
 
 def sensor_depth(depth: np.ndarray, image: np.ndarray, K: np.ndarray, pose: np.ndarray,
                  z_range: tuple[float, float], index: int, max_step: float = 0.01,
-                 speckle_px: int = 100) -> DepthMap:
+                 speckle_px: int = 100, stride: int = 1) -> DepthMap:
     """The depth map of a view whose depth came from the camera (float metres along z on the undistorted
     image's pixels, 0 = none), cleaned as a stereo camera's depth needs (no matching, no cross-check):
 
@@ -121,7 +121,9 @@ def sensor_depth(depth: np.ndarray, image: np.ndarray, K: np.ndarray, pose: np.n
     - depth edges: a pixel whose 3x3 neighbourhood spans more than `max_step` x its depth is dropped
       (mixed foreground/background "flying pixels" at occluding contours, and surfaces seen edge-on);
     - speckles: connected blobs under `speckle_px` pixels whose neighbours step by less than `max_step`
-      x depth are dropped (isolated mismatches, as SGBM's speckle filter does).
+      x depth are dropped (isolated mismatches, as SGBM's speckle filter does);
+    - `stride` > 1 keeps every stride-th pixel in both directions (no averaging across edges), with the
+      intrinsics scaled to match: fewer points for the fusion, which samples depth at voxel centres.
 
     The camera is the view's own (pinhole `K`, `pose` world_from_camera)."""
     d = np.asarray(depth, np.float32).copy()
@@ -138,7 +140,12 @@ def sensor_depth(depth: np.ndarray, image: np.ndarray, K: np.ndarray, pose: np.n
         max_diff = int(max(1, round(max_step * float(np.median(d[d > 0])) / step_units))) if np.any(d > 0) else 1
         cv2.filterSpeckles(counts, 0, speckle_px, max_diff)
         d[counts == 0] = 0
-    return DepthMap(d, np.asarray(K, float).copy(), np.asarray(pose, float).copy(), image, index)
+    K = np.asarray(K, float).copy()
+    if stride > 1:
+        # pixel centres at integers: pixel u' of the subsampled map is pixel stride * u' of the full one
+        d, image = np.ascontiguousarray(d[::stride, ::stride]), np.ascontiguousarray(image[::stride, ::stride])
+        K[:2] /= stride
+    return DepthMap(d, K, np.asarray(pose, float).copy(), image, index)
 
 
 def _project(dm: DepthMap, X: np.ndarray):
