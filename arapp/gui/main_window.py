@@ -24,6 +24,7 @@ from arapp.app.session import Session, as_bool
 from arapp.gui.errors import ErrorBoxes
 from arapp.gui.first_hour import install as install_first_hour
 from arapp.gui.habits import install_habits
+from arapp.gui.marker_marks import install_marks
 from arapp.gui.menus import build_menus, update_recent_menus
 from arapp.gui.panels.model import MODEL_FILTER, ModelPanel, library_files
 from arapp.gui.panels.replay import ReplayBar
@@ -77,6 +78,7 @@ class MainWindow(QMainWindow):
         install_habits(self)  # undo/redo, export, screenshot, AR video, title, controls enabled when they can act
         install_first_hour(self)  # welcome, calibration banner + wizard, lost hint, printer set-up, Help
         install_scan(self)  # scan mode: the Scan dock and the dome of view directions over the view
+        install_marks(self)  # detected markers outlined with their axes (View menu toggle)
         QTimer.singleShot(0, self._start_thumbnails)
         QTimer.singleShot(0, self.freeze_heap)
 
