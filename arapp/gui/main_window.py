@@ -25,6 +25,7 @@ from arapp.gui.errors import ErrorBoxes
 from arapp.gui.first_hour import install as install_first_hour
 from arapp.gui.habits import install_habits
 from arapp.gui.marker_marks import install_marks
+from arapp.gui.orbit_view import install_orbit
 from arapp.gui.menus import build_menus, update_recent_menus
 from arapp.gui.panels.model import MODEL_FILTER, ModelPanel, library_files
 from arapp.gui.panels.replay import ReplayBar
@@ -79,6 +80,7 @@ class MainWindow(QMainWindow):
         install_first_hour(self)  # welcome, calibration banner + wizard, lost hint, printer set-up, Help
         install_scan(self)  # scan mode: the Scan dock and the dome of view directions over the view
         install_marks(self)  # detected markers outlined with their axes (View menu toggle)
+        install_orbit(self)  # the model in 3D when there is nothing to put it on
         QTimer.singleShot(0, self._start_thumbnails)
         QTimer.singleShot(0, self.freeze_heap)
 

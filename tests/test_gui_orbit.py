@@ -1,0 +1,101 @@
+"""The 3D orbit view (pytest-qt, offscreen GL): with a model loaded and no source the view area shows the
+model, its pixels inside the bounding box projected with cv2.projectPoints at the orbit camera's pose
+and the background outside it; a drag turns it and the wheel zooms."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from PySide6.QtCore import QPoint, QSettings, Qt
+
+MODELS = Path(__file__).resolve().parents[1] / "models"
+TIMEOUT_MS = 30000
+
+
+@pytest.fixture()
+def window(qtbot, tmp_path, monkeypatch):
+    monkeypatch.setenv("ARAPP_CONFIG_DIR", str(tmp_path / "config"))
+    monkeypatch.setenv("ARAPP_GUI_ENGINE", "threads")
+    from arapp.gui.main_window import MainWindow
+
+    w = MainWindow(settings=QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat))
+    qtbot.addWidget(w)
+    w.resize(1100, 700)
+    w.show()
+    yield w
+    for box in w.open_error_boxes():
+        box.close()
+    w.close()
+
+
+def grab_rgb(widget) -> np.ndarray:
+    img = widget.grab().toImage().convertToFormat(widget.grab().toImage().Format.Format_RGB888)
+    w, h = img.width(), img.height()
+    return np.frombuffer(img.constBits(), np.uint8).reshape(h, img.bytesPerLine())[:, : w * 3].reshape(h, w, 3).copy()
+
+
+def projected_box(orbit_view, vertices) -> np.ndarray:
+    """Filled convex hull (widget pixels) of the model's bounding-box corners by cv2.projectPoints."""
+    from arapp.app.orbit import camera_from_model, virtual_camera
+
+    pic = orbit_view.picture()
+    cam = virtual_camera(pic.width(), pic.height())
+    cfm = camera_from_model(orbit_view.orbit, vertices, cam)
+    lo, hi = vertices.min(0), vertices.max(0)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    rvec, _ = cv2.Rodrigues(cfm[:3, :3])
+    uv, _ = cv2.projectPoints(corners, rvec, cfm[:3, 3], cam.K, cam.dist)
+    uv = uv.reshape(-1, 2) * (orbit_view.width() / pic.width())  # picture pixels -> widget pixels
+    mask = np.zeros((orbit_view.height(), orbit_view.width()), np.uint8)
+    cv2.fillConvexPoly(mask, np.round(cv2.convexHull(uv.astype(np.float32)).reshape(-1, 2)).astype(np.int32), 1)
+    return mask.astype(bool)
+
+
+def model_pixels(rgb: np.ndarray) -> np.ndarray:
+    from arapp.gui.orbit_view import BACKGROUND_BGR
+
+    bg = np.array(BACKGROUND_BGR[::-1], int)
+    return np.abs(rgb.astype(int) - bg).max(axis=2) > 20
+
+
+def test_model_without_source_shows_in_the_orbit_view(qtbot, window):
+    w = window
+    assert not w.orbit_view.isVisible()  # nothing loaded: the welcome view
+    w.open_model(str(MODELS / "vase.json"))
+    qtbot.waitUntil(lambda: w.model is not None, timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: w.orbit_view.isVisible() and w.orbit_view.picture() is not None, timeout=TIMEOUT_MS)
+    ov = w.orbit_view
+    assert w.view.isVisible() and ov.geometry() == w.view.rect()
+    assert ov.error is None
+    verts = np.asarray(w.mesh_lines[0].vertices, float)
+
+    rgb = grab_rgb(ov)
+    seen = model_pixels(rgb)
+    seen[-40:] = False  # the caption along the bottom edge
+    box = projected_box(ov, verts)
+    grown = cv2.dilate(box.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    assert seen.sum() > 0.25 * box.sum()             # the model fills a good share of its box
+    assert (seen & ~grown).sum() <= 0.002 * seen.size  # and nothing is drawn outside it
+
+    # a drag turns it (a different picture, still inside the new box); the wheel zooms in
+    before = ov.orbit
+    qtbot.mousePress(ov, Qt.MouseButton.LeftButton, pos=QPoint(200, 200))
+    qtbot.mouseMove(ov, QPoint(300, 230))
+    qtbot.mouseRelease(ov, Qt.MouseButton.LeftButton, pos=QPoint(300, 230))
+    assert ov.orbit.azimuth_deg != before.azimuth_deg and ov.orbit.elevation_deg != before.elevation_deg
+    qtbot.wait(50)
+    turned = model_pixels(grab_rgb(ov))
+    turned[-40:] = False
+    assert (turned != seen).mean() > 0.01
+    box2 = cv2.dilate(projected_box(ov, verts).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    assert (turned & ~box2).sum() <= 0.002 * turned.size
+    area = turned.sum()
+    ov.orbit = ov.orbit.zoomed(3)
+    ov.model_changed()
+    qtbot.wait(50)
+    zoomed = model_pixels(grab_rgb(ov))
+    zoomed[-40:] = False
+    assert zoomed.sum() > 1.5 * area
