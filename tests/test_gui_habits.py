@@ -407,6 +407,8 @@ def test_bed_preview_draws_the_model_as_a_ghost():
     s.edit_control_point(0, 1, 1, tuple(model.surfaces[0].control_points[1, 1]), 2.0)
     assert [c for c in sent if type(c).__name__ == "SetModel"][-1].mode == GHOST_MODE  # an edit keeps the ghost
     s.set_toolpaths(None)
+    assert [c.mode for c in sent if type(c).__name__ == "SetMode"][-1] == GHOST_MODE  # until the bed is clear
+    s._toolpaths_shown({"gen": s.toolpaths_gen, "layers": 0})  # the engine: the preview is cleared
     assert [c.mode for c in sent if type(c).__name__ == "SetMode"][-1] == "shaded"
 
 

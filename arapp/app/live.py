@@ -134,6 +134,7 @@ class LiveEngine:
         self.events = Events("opened", "ready", "error", "ended", "recorded", "toolpaths")
         self.captured, self.shown = LatestSlot(), TappedSlot()
         self.ar_video: ArVideoWriter | None = None
+        self._ar_closing: threading.Thread | None = None  # finishing the AR video file
         self.stage = ProcessingStage(display_size)
         self.info: SourceInfo | None = None
         self.autoplay = playing
@@ -176,7 +177,13 @@ class LiveEngine:
         self.events.ready.emit()
 
     def stop(self, wait: float = 0.0) -> None:
-        """Ask both threads to finish (they close the source and the pipeline themselves); optionally join."""
+        """Ask both threads to finish (they close the source and the pipeline themselves); optionally join.
+        An AR video being written is finished first (an MP4 cut off before its index cannot be played)."""
+        if self.ar_video is not None:
+            self.ar_record_stop()
+        closing = self._ar_closing
+        if closing is not None:
+            closing.join(10.0)
         self.player.stop()
         with self._toolpaths_lock:
             if self._toolpaths is not None:
@@ -292,4 +299,5 @@ class LiveEngine:
                 return
             self.events.recorded.emit(str(path))
 
-        threading.Thread(target=finish, name="arapp-ar-video-close", daemon=True).start()
+        self._ar_closing = threading.Thread(target=finish, name="arapp-ar-video-close", daemon=True)
+        self._ar_closing.start()

@@ -131,6 +131,7 @@ class Session:
         self.toolpaths_spec: dict | None = None  # the print preview asked for (arapp.app.toolpaths.preview_spec)
         self.toolpaths_gen = 0
         self.toolpaths_info: dict | None = None  # what the engine drew
+        self._unghost_gen: int | None = None  # the preview clear after which the model is drawn solid again
         self.recording_folder = None
         self.ar_video_path: Path | None = None  # the AR video being recorded (arapp.app.capture)
         self.print_session: PrintSession | None = None
@@ -522,13 +523,20 @@ class Session:
         ghost_before = self.toolpaths_spec is not None
         self.toolpaths_spec = None if spec is None else dict(spec)
         self.send(cmd.ShowToolpaths(self.toolpaths_spec, self.toolpaths_gen))
-        if (self.toolpaths_spec is not None) != ghost_before:
+        if self.toolpaths_spec is not None and not ghost_before:
+            self._unghost_gen = None
             self.send(cmd.SetMode(self.display_mode))
-            if self.toolpaths_spec is not None:
-                self.status(GHOST_NOTE, 10000)
+            self.status(GHOST_NOTE, 10000)
+        elif self.toolpaths_spec is None and ghost_before:
+            # solid again once the bed is cleared (the engine's toolpaths event), not a frame before
+            self._unghost_gen = self.toolpaths_gen
 
     def _toolpaths_shown(self, info: dict) -> None:
         self.toolpaths_info = info
+        if (self._unghost_gen is not None and self.toolpaths_spec is None
+                and int(info.get("gen", -1)) >= self._unghost_gen):
+            self._unghost_gen = None
+            self.send(cmd.SetMode(self.display_mode))
         if self.print_session is not None and info.get("layers"):
             self.print_session.preview_shown(info)
         self.events.toolpaths_shown.emit(info)

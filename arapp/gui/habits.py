@@ -12,7 +12,7 @@ from pathlib import Path
 
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QAction, QKeySequence
-from PySide6.QtWidgets import QFileDialog
+from PySide6.QtWidgets import QFileDialog, QPushButton
 
 from arapp.app.capture import new_capture_path
 from arapp.app.model_export import export_filter, export_suffixes
@@ -55,6 +55,12 @@ class Habits:
         self.screenshot_action = _action(window, "Save screenshot", self.save_screenshot, "Ctrl+S")
         self.record_ar_action = _action(window, "Record AR video", self.toggle_ar_recording, "Ctrl+Shift+R")
         self.record_ar_action.setCheckable(True)
+        # beside Record (the raw camera) in the replay bar: what is on screen, for any source
+        self.record_ar_button = QPushButton("Record AR video")
+        self.record_ar_button.setToolTip("Record the view as shown, the model drawn over the camera (Ctrl+Shift+R)")
+        self.record_ar_button.setCheckable(True)
+        self.record_ar_button.clicked.connect(lambda _c=False: self.record_ar_action.trigger())
+        window.replay.layout().addWidget(self.record_ar_button)
         # after "Open model..." and before the recent menus: saving sits with opening
         anchor = next((a for a in file_menu.actions() if a.menu() is not None), None)
         for a in (self.export_action, self.screenshot_action, self.record_ar_action):
@@ -83,7 +89,10 @@ class Habits:
         """The title and every control's enabled state from the session."""
         w, s = self.w, self.session
         w.setWindowTitle(window_title(s))
-        self.record_ar_action.setChecked(s.ar_video_path is not None)
+        recording = s.ar_video_path is not None
+        self.record_ar_action.setChecked(recording)
+        self.record_ar_button.setChecked(recording)
+        self.record_ar_button.setText("Stop AR video" if recording else "Record AR video")
         st = control_state(s)
         if st == self._state:
             return
@@ -103,6 +112,7 @@ class Habits:
         self.export_action.setEnabled(st["export"])
         self.screenshot_action.setEnabled(st["screenshot"])
         self.record_ar_action.setEnabled(st["record_ar"])
+        self.record_ar_button.setEnabled(st["record_ar"])
         self.undo_action.setEnabled(st["undo"])
         self.redo_action.setEnabled(st["redo"])
 
