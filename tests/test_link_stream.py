@@ -93,6 +93,21 @@ def test_resend_rewinds_once_and_a_doubled_request_is_absorbed():
     assert s.on_ok(0.3) is Step.CONFIRMED and s.confirmed == 1
 
 
+def test_the_same_request_after_its_own_error_is_a_new_one():
+    """OctoPrint's VirtualPrinter refuses the copy sent for a request again, with an Error line first."""
+    s = stream(window=1)
+    s.start(program_items(["G1 X1", "G1 X2"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    s.on_error(0.1)
+    assert s.on_resend(1, 0.1) is Step.REWOUND
+    s.on_ok(0.1)
+    assert s.frames_to_send(0.1) == [framed(1, "G1 X1")]
+    s.on_error(0.2)
+    assert s.on_resend(1, 0.2) is Step.REWOUND
+    assert s.on_ok(0.2) is Step.IGNORED
+    assert s.frames_to_send(0.2) == [framed(1, "G1 X1")]
+
+
 def test_resend_of_a_confirmed_line_or_line_zero_stops():
     s = stream(window=1)
     s.start(program_items(["G1 X1", "G1 X2", "G1 X3"]), JobState(), now=0.0)
@@ -130,8 +145,9 @@ def test_stale_copies_absorb_their_own_replies():
     s.frames_to_send(0.0)  # 1, 2, 3 in flight
     assert s.on_resend(1, 0.1) is Step.REWOUND
     assert s.on_ok(0.1) is Step.IGNORED
-    # Lines 2 and 3 were refused by number: each gets Resend: 1 + ok, answering its stale copy.
+    # Lines 2 and 3 were refused by number: each gets Error + Resend: 1 + ok, answering its stale copy.
     for t in (0.2, 0.3):
+        s.on_error(t)
         assert s.on_resend(1, t) is Step.IGNORED
         assert s.on_ok(t) is Step.IGNORED
     assert s.confirmed == 0
@@ -393,8 +409,10 @@ def test_a_stale_copy_asked_for_twice_absorbs_the_second_ok():
     s.frames_to_send(0.0)  # 1, 2
     assert s.on_resend(1, 0.1) is Step.REWOUND
     assert s.on_ok(0.1) is Step.IGNORED
+    s.on_error(0.2)
     assert s.on_resend(1, 0.2) is Step.IGNORED  # stale copy 2's request
-    assert s.on_resend(1, 0.2) is Step.IGNORED  # ... doubled
+    assert s.absorb_oks == 0 and s.inflight[0].rejected
+    assert s.on_resend(1, 0.2) is Step.IGNORED  # ... doubled (no Error line of its own)
     assert s.absorb_oks == 1
     assert s.on_ok(0.2) is Step.IGNORED and s.on_ok(0.2) is Step.IGNORED
     assert s.absorb_oks == 0 and s.confirmed == 0

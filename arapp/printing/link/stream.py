@@ -21,8 +21,9 @@ The rules (docs/domain.md §4, issue #14):
 - A resend request for a line the firmware confirmed, or for line 0 after the
   start-up exchange, cannot come from a healthy exchange (a reset without its
   banner, or noise): the stream stops (`StopReason.BAD_RESEND`), it never
-  replays. A request is honoured once: the same request again before the
-  line was answered is a doubled reply, and its `ok` is absorbed.
+  replays. A request is honoured once: the same request again, without an
+  `Error:` line of its own, before the line was answered is a doubled reply,
+  and its `ok` is absorbed.
 - Never more than `window` lines (and `rx_buffer` bytes) in flight.
 
 Outcomes are typed: each `on_*` method returns a `Step` (what happened) or a
@@ -269,6 +270,7 @@ class LineStream:
 
     def on_resend(self, line: int, now: float) -> Step | Stop:
         """`Resend: line`: the printer's last accepted line is `line - 1`."""
+        after_error = self.error_seen_at is not None  # a request with its own `Error:` line is a new one
         self.error_seen_at = None
         self._answered(now)
         self.resends += 1
@@ -279,17 +281,16 @@ class LineStream:
             return Stop(StopReason.BAD_RESEND,
                         f"the printer asked for line {line} again, but it had confirmed every line up to "
                         f"{self.confirmed}: it was reset or the reply was garbled; nothing was sent twice")
+        if not after_error and self.honoured == (line, self.confirmed):
+            # The same request again, without an `Error:` line of its own (Marlin says why before each
+            # real request), and nothing confirmed since: a doubled reply. Its `ok` answers nothing.
+            self.absorb_oks += 1
+            return Step.IGNORED
         head = self.inflight[0] if self.inflight else None
         if head is not None and head.epoch < self.epoch:
             if head.rejected:
                 self.absorb_oks += 1  # a second request for the same stale copy: a doubled reply
             head.rejected = True  # answers a copy sent before the last rewind; its ok follows
-            return Step.IGNORED
-        if self.honoured is not None and self.honoured == (line, self.confirmed) and head is not None \
-                and head.number == line and not head.rejected and head.epoch == self.epoch \
-                and self.inflight_sent_after_rewind():
-            # The same request again before the line sent for it was answered: a doubled reply.
-            self.absorb_oks += 1
             return Step.IGNORED
         if head is not None:
             head.rejected = True  # the ok that follows answers this request
@@ -299,9 +300,6 @@ class LineStream:
         self.epoch += 1
         self.next_number = line
         return Step.REWOUND
-
-    def inflight_sent_after_rewind(self) -> bool:
-        return bool(self.inflight) and all(c.epoch == self.epoch for c in self.inflight)
 
     def on_error(self, now: float) -> Step:
         """A recoverable `Error:` (checksum, line number): a resend request should follow at once."""
