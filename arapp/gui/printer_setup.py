@@ -50,7 +50,7 @@ def saved_choice() -> dict:
 
 def profile_summary(profile) -> str:
     b = profile.bed
-    anchor = "bed marker set up" if profile.bed_anchor is not None else "no bed marker (arapp printer bed-anchor)"
+    anchor = "bed marker set up" if profile.bed_anchor is not None else "no bed marker (Bed marker...)"
     return (f"build volume {b.width:g} x {b.depth:g} x {b.height:g} mm, nozzle {profile.nozzle_diameter:g} mm, "
             f"filament {profile.filament_diameter:g} mm; {anchor}")
 
@@ -77,7 +77,13 @@ class PrinterSetupDialog(QDialog):
         self.profile_info = QLabel("")
         self.profile_info.setWordWrap(True)
         form.addRow("Printer", self.profile)
-        form.addRow("", self.profile_info)
+        self.bed_anchor_button = QPushButton("Bed marker...")
+        self.bed_anchor_button.setToolTip("Which marker lies on the bed and where (saved in the printer profile)")
+        self.bed_anchor_button.clicked.connect(self.edit_bed_anchor)
+        irow = QHBoxLayout()
+        irow.addWidget(self.profile_info, 1)
+        irow.addWidget(self.bed_anchor_button)
+        form.addRow("", irow)
 
         self.serial_radio = QRadioButton("USB / serial")
         self.octo_radio = QRadioButton("OctoPrint")
@@ -152,6 +158,18 @@ class PrinterSetupDialog(QDialog):
             else:
                 self.profile.setCurrentIndex(0)
         self._show_profile()
+
+    def edit_bed_anchor(self) -> None:
+        """The bed marker dialog for the printer chosen; a preset becomes a profile file in the config folder."""
+        from arapp.gui.bed_anchor_dialog import BedAnchorDialog
+
+        choice = self.profile.currentData()
+        if not isinstance(choice, str) or choice == "file":
+            return
+        dlg = BedAnchorDialog(choice, self)
+        dlg.accepted.connect(lambda: self.set_profile_file(str(dlg.saved_path)))
+        self.bed_anchor_dialog = dlg
+        dlg.open()
 
     def set_profile_file(self, path: str) -> None:
         i = self.profile.findData(path)
