@@ -16,8 +16,8 @@ import numpy as np
 
 from tracking.anchors.model import build_models
 
-# the triad's length as a share of the anchor's first marker side: visible without hiding the marker
-AXIS_SHARE = 0.6
+# the triad's length in marker sides: plain to see, and short of the next marker on a board
+AXIS_SHARE = 1.0
 MIN_DEPTH_M = 0.01  # points nearer the camera than this (or behind it) are not drawn
 
 
