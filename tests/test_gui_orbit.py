@@ -99,3 +99,25 @@ def test_model_without_source_shows_in_the_orbit_view(qtbot, window):
     zoomed = model_pixels(grab_rgb(ov))
     zoomed[-40:] = False
     assert zoomed.sum() > 1.5 * area
+
+
+def test_inset_while_the_marker_is_lost_and_gone_once_a_source_has_no_model(qtbot, window, tmp_path):
+    """A plain video of a desk with no marker: the camera picture stays, the model turns in an inset."""
+    path = tmp_path / "desk.avi"
+    wr = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10, (320, 240))
+    base = np.random.default_rng(0).integers(90, 160, (240, 320, 3), dtype=np.uint8)
+    for _ in range(30):
+        wr.write(base)
+    wr.release()
+    w = window
+    w.open_source(f"file:{path}")
+    qtbot.waitUntil(lambda: w.session.last_shown is not None, timeout=TIMEOUT_MS)
+    assert not w.orbit_view.isVisible()  # no model: nothing to show in 3D
+    w.open_model(str(MODELS / "vase.json"))
+    qtbot.waitUntil(lambda: w.orbit_view.isVisible(), timeout=TIMEOUT_MS)
+    ov, view = w.orbit_view, w.view.rect()
+    assert ov.wanted() == "inset"
+    assert ov.width() < 0.5 * view.width() and ov.geometry().right() <= view.right()
+    assert ov.geometry().bottom() <= view.bottom()
+    qtbot.waitUntil(lambda: ov.picture() is not None, timeout=TIMEOUT_MS)
+    assert model_pixels(grab_rgb(ov))[:-30].mean() > 0.03
