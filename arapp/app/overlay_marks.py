@@ -35,9 +35,14 @@ class MarkerMarks:
     axes: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
 
 
-def _in_front(camera_from_world: np.ndarray, pts_world: np.ndarray) -> bool:
-    z = pts_world @ camera_from_world[2, :3] + camera_from_world[2, 3]
-    return bool(np.all(z > MIN_DEPTH_M))
+_models_cache: tuple = (None, [])  # (the anchors list last asked about, its models): frames share one list
+
+
+def _models(anchors: list) -> list:
+    global _models_cache
+    if _models_cache[0] is not anchors:
+        _models_cache = (anchors, build_models(list(anchors)))
+    return _models_cache[1]
 
 
 def marker_marks(camera, anchors: list, world_from_camera: np.ndarray | None, markers_seen: int = 1) -> MarkerMarks:
@@ -49,23 +54,32 @@ def marker_marks(camera, anchors: list, world_from_camera: np.ndarray | None, ma
     pose = np.asarray(world_from_camera, float)
     camera_from_world = np.linalg.inv(pose)
     w, h = camera.width, camera.height
-    for model in build_models(list(anchors)):
+    quads_w, triads_w = [], []
+    for model in _models(anchors):
         side = None
         for corners in model.markers.values():
-            pw = model.to_world(np.asarray(corners, float))
-            if not _in_front(camera_from_world, pw):
-                continue
-            uv = camera.project_world(pw, pose)
-            if np.all((uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5)):
-                marks.quads.append(uv)
+            c = np.asarray(corners, float)
+            quads_w.append(model.to_world(c))
             if side is None:
-                side = float(np.linalg.norm(np.asarray(corners, float)[1] - np.asarray(corners, float)[0]))
+                side = float(np.linalg.norm(c[1] - c[0]))
         if side is None:  # a QR code or ChArUco without markers listed: size the triad by the outline
             outline = np.asarray(model.outline(), float)
             side = float(np.ptp(outline[:, 0])) if len(outline) else 0.05
         length = AXIS_SHARE * side
-        ends = model.to_world(np.array([[0, 0, 0], [length, 0, 0], [0, length, 0], [0, 0, length]], float))
-        if _in_front(camera_from_world, ends):
-            uv = camera.project_world(ends, pose)
-            marks.axes.append((uv[0], uv[1], uv[2], uv[3]))
+        triads_w.append(model.to_world(np.array([[0, 0, 0], [length, 0, 0], [0, length, 0], [0, 0, length]], float)))
+    # one projection for every point: the per-frame cost stays well under a millisecond on the UI thread
+    pts = np.concatenate(quads_w + triads_w).reshape(-1, 3)
+    depth = pts @ camera_from_world[2, :3] + camera_from_world[2, 3]
+    uv = camera.project_world(pts, pose)
+    inside = (uv[:, 0] >= -0.5) & (uv[:, 0] <= w - 0.5) & (uv[:, 1] >= -0.5) & (uv[:, 1] <= h - 0.5)
+    front = depth > MIN_DEPTH_M
+    for k in range(len(quads_w)):
+        s = slice(4 * k, 4 * k + 4)
+        if front[s].all() and inside[s].all():
+            marks.quads.append(uv[s])
+    base = 4 * len(quads_w)
+    for k in range(len(triads_w)):
+        s = slice(base + 4 * k, base + 4 * k + 4)
+        if front[s].all():
+            marks.axes.append(tuple(uv[s]))
     return marks
