@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from PySide6.QtCore import QSettings, Qt
@@ -67,6 +68,22 @@ def test_scan_fills_the_dome_and_the_mesh_becomes_the_model(qtbot, tmp_path, vas
     d = cKDTree(truth.mesh.sample(20000)).query(mesh.sample(20000))[0] * 1000
     print(f"GUI scan vs truth: median {np.median(d):.2f} mm, p90 {np.percentile(d, 90):.2f} mm; {scan.stats}")
     assert np.median(d) < 2.0
+    # drawn over the real object: the frames go on (looped) and the composite covers the true vase's silhouette
+    w.session.set_loop(True)
+    w.session.toggle_play() if not w.session.playing else None
+    qtbot.waitUntil(lambda: w.last_shown.result.extra.get("model_gen") == w.model_gen
+                    and w.last_shown.result.extra.get("mesh_faces", 0) > 0, timeout=30000)
+    shown = w.last_shown
+    cam, pose = w.source_info.camera, shown.result.world_from_camera
+    cfw = np.linalg.inv(pose)
+    pts, _ = cv2.projectPoints(np.asarray(truth.mesh.vertices) @ cfw[:3, :3].T + cfw[:3, 3], np.zeros(3),
+                               np.zeros(3), cam.K, cam.dist)
+    silhouette = np.zeros(shown.frame.shape[:2], np.uint8)
+    cv2.fillPoly(silhouette, [cv2.convexHull(pts.reshape(-1, 2).astype(np.int32))], 1)
+    inner = cv2.erode(silhouette, np.ones((7, 7), np.uint8)).astype(bool)
+    changed = np.abs(shown.result.image.astype(np.int16) - shown.frame.astype(np.int16)).max(axis=2) > 12
+    print(f"model drawn over {changed[inner].mean():.3f} of the true vase's silhouette (frame {shown.result.index})")
+    assert changed[inner].mean() > 0.8
     assert panel.use_button.isEnabled()
     qtbot.mouseClick(panel.use_button, Qt.MouseButton.LeftButton)
     assert scan.state == "idle" and not w.scan_overlay.isVisible()

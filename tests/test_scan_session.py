@@ -122,6 +122,8 @@ def test_next_hint_names_the_nearest_empty_direction(app):
     uv, _ = cv2.projectPoints(X[None], rvec, cfw[:3, 3], default_K(W, H), np.zeros(5))
     assert drawing.arrow[1] == pytest.approx(tuple(uv.reshape(2)), abs=1e-3)
     assert len(drawing.polygons) == 40 and sum(drawing.covered) == 39
+    # the near side of the dome faces the camera, the far side does not
+    assert drawing.facing[expected_cell(10, 30)] and not drawing.facing[expected_cell(190, 30)]
 
 
 def test_registered_placement_leaves_the_mesh_where_it_is():

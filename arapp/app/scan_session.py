@@ -130,13 +130,15 @@ class Hint:
 @dataclass
 class DomeDrawing:
     """The dome as seen in one frame, in that frame's pixels (u right, v down, pixel centres at integers):
-    per cell an (M, 2) polygon or None where any corner is behind the camera, whether it is covered; the
-    hint's arrow (from, to) or None; the text for the user."""
+    per cell an (M, 2) polygon or None where any corner is behind the camera, whether it is covered, whether
+    its outside faces the camera (the near side of the dome; the far side shows through it); the hint's
+    arrow (from, to) or None; the text for the user."""
 
     polygons: list
     covered: list
     arrow: tuple | None
     text: str
+    facing: list = field(default_factory=list)
 
 
 @dataclass
@@ -347,10 +349,12 @@ class ScanSession:
         if pose is None or camera is None or self.frame is None:
             return None
         cam_from_world = np.linalg.inv(pose)
-        polys = []
+        polys, facing = [], []
+        eye = self.frame.to_local(pose[:3, 3][None])[0] - self.frame.to_local(self.centre[None])[0]
         for c in range(len(self.hemi)):
-            ae = self.hemi.outline(c)
-            polys.append(self._project(ae, cam_from_world, camera))
+            polys.append(self._project(self.hemi.outline(c), cam_from_world, camera))
+            n = direction(*self.hemi.centre(c))  # the cell's outward normal; its point is radius * n
+            facing.append(bool((eye - self.radius * n) @ n > 0))
         hint = self.next_hint(pose)
         arrow = None
         if hint is not None:
@@ -361,7 +365,7 @@ class ScanSession:
             if ends is not None:
                 arrow = (tuple(ends[0]), tuple(ends[1]))
         text = hint.text if hint is not None else "Every direction is covered: Reconstruct"
-        return DomeDrawing(polys, [bool(n) for n in self.counts], arrow, text)
+        return DomeDrawing(polys, [bool(n) for n in self.counts], arrow, text, facing)
 
     def _project(self, az_el: np.ndarray, cam_from_world: np.ndarray, camera):
         L = direction(az_el[:, 0], az_el[:, 1]) * self.radius

@@ -63,13 +63,16 @@ class DomeOverlay(QWidget):
         p = QPainter(self)
         p.setRenderHint(QPainter.RenderHint.Antialiasing, True)
         p.setClipRect(rect)
-        for poly, covered in zip(drawing.polygons, drawing.covered):
-            if poly is None:
-                continue
-            q = QPolygonF([pt(uv) for uv in poly])
-            p.setPen(QPen(QColor(255, 255, 255, 150), 1.0))
-            p.setBrush(QBrush(QColor(40, 200, 90, 110)) if covered else Qt.BrushStyle.NoBrush)
-            p.drawPolygon(q)
+        # the far side first, faint, then the near side over it
+        for near in (False, True):
+            for poly, covered, facing in zip(drawing.polygons, drawing.covered, drawing.facing):
+                if poly is None or facing != near:
+                    continue
+                q = QPolygonF([pt(uv) for uv in poly])
+                p.setPen(QPen(QColor(255, 255, 255, 170 if near else 60), 1.2 if near else 0.8))
+                fill = QColor(40, 200, 90, 120 if near else 45)
+                p.setBrush(QBrush(fill) if covered else Qt.BrushStyle.NoBrush)
+                p.drawPolygon(q)
         if drawing.arrow is not None:
             a, b = pt(drawing.arrow[0]), pt(drawing.arrow[1])
             p.setPen(QPen(QColor(255, 210, 0), 4.0, Qt.PenStyle.SolidLine, Qt.PenCapStyle.RoundCap))
