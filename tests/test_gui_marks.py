@@ -123,3 +123,33 @@ def test_detected_marker_outlined_when_on_and_not_when_off(qtbot, window, record
     # on: the outline's colour along every edge; off: the same picture as before
     assert (changed_at(off, on, pts) > 60).mean() >= 0.9
     assert changed_at(off, off_again, pts).max() <= 2
+
+
+def test_marks_only_for_markers_in_the_frame_and_none_without_detection():
+    """Headless: a board seen so that its right column leaves the frame gets outlines for the markers
+    wholly inside only (checked with cv2.projectPoints); no marker detected, or no pose: nothing."""
+    from arapp.app.overlay_marks import marker_marks
+    from tracking.anchors.model import build_models
+    from tracking.anchors.render import look_at
+    from tracking.camera import Camera
+    from tracking.session import parse_anchors
+
+    anchors = parse_anchors([{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
+                              "marker_length": 0.04, "separation": 0.01, "first_id": 0}])
+    cam = Camera(np.array([[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]]), np.zeros(5), 640, 480)
+    pose = look_at([0.17, 0.07, 0.2], [0.17, 0.07, 0.0], up=(0.0, 1.0, 0.0))
+    cfw = np.linalg.inv(pose)
+    rvec, _ = cv2.Rodrigues(cfw[:3, :3])
+    inside = []
+    for corners in build_models(anchors)[0].markers.values():
+        uv, _ = cv2.projectPoints(np.asarray(corners, float), rvec, cfw[:3, 3], cam.K, cam.dist)
+        uv = uv.reshape(4, 2)
+        if ((uv >= -0.5) & (uv <= [639.5, 479.5])).all():
+            inside.append(uv)
+    marks = marker_marks(cam, anchors, pose, markers_seen=5)
+    assert 0 < len(inside) < 12 and len(marks.quads) == len(inside)
+    for got, want in zip(sorted(marks.quads, key=lambda q: tuple(q[0])), sorted(inside, key=lambda q: tuple(q[0]))):
+        assert np.abs(got - want).max() < 0.01
+    assert len(marks.axes) == 1
+    assert not marker_marks(cam, anchors, pose, markers_seen=0).quads
+    assert not marker_marks(cam, anchors, None).quads
