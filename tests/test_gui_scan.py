@@ -89,3 +89,21 @@ def test_scan_fills_the_dome_and_the_mesh_becomes_the_model(qtbot, tmp_path, vas
     assert scan.state == "idle" and not w.scan_overlay.isVisible()
     assert Path(w.model_path).exists() and w.model is not None
     w.close()
+
+
+def test_start_scan_reopens_a_source_that_does_not_send_frames_as_captured(qtbot, tmp_path, vase_recording):
+    from arapp.gui.main_window import MainWindow
+
+    folder, _ = vase_recording
+    w = MainWindow(settings=QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat))
+    w.engine_kind = "process"
+    assert not w.full_frames
+    qtbot.addWidget(w)
+    w.show()
+    w.open_source(str(folder))
+    qtbot.waitUntil(lambda: w.last_shown is not None, timeout=30000)
+    assert w.last_shown.frame is None          # the process engine sends only the composite
+    qtbot.mouseClick(w.scan_panel.start_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: w.scan_session.state == "scanning" and len(w.scan_session.views) > 0, timeout=30000)
+    assert w.full_frames and w.last_shown.frame is not None
+    w.close()

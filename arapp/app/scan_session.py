@@ -278,7 +278,7 @@ class ScanSession:
         return float(np.count_nonzero(self.counts)) / len(self.hemi)
 
     def _frame(self, shown) -> None:
-        if self.state != "scanning":
+        if self.state not in ("scanning", "done"):  # after a reconstruction: capture on, then reconstruct again
             return
         r = shown.result
         self.offer(shown.frame, r.world_from_camera, r.state, r.index, r.t)
@@ -286,7 +286,7 @@ class ScanSession:
     def offer(self, image, pose, state: str, index: int = 0, t: float = 0.0) -> bool:
         """A processed frame (BGR image as captured, or None; its pose; the tracking state): captured or not
         by the rule of the module doc. Returns whether it was captured."""
-        if self.state != "scanning" or pose is None:
+        if self.state not in ("scanning", "done") or pose is None:
             return False
         pose = np.asarray(pose, float)
         self.last_pose = pose
