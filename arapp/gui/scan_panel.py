@@ -97,11 +97,13 @@ class DomeOverlay(QWidget):
 
 
 class ScanPanel(QWidget):
-    """Start or stop scanning, coverage, Reconstruct / Cancel with progress, and Use as model."""
+    """Start or stop scanning, coverage, Reconstruct / Cancel with progress, and Use as model. `start()`
+    begins scanning (default ScanSession.start; the window's also makes sure frames come as captured)."""
 
-    def __init__(self, scan: ScanSession, parent=None):
+    def __init__(self, scan: ScanSession, start=None, parent=None):
         super().__init__(parent)
         self.scan = scan
+        self._start = start or scan.start
         lay = QVBoxLayout(self)
         self.intro = QLabel("Stand the object on the marker board and circle it slowly, low and high, "
                             "until the dome is filled; then Reconstruct.")
@@ -138,7 +140,7 @@ class ScanPanel(QWidget):
         self.refresh()
 
     def toggle_scan(self) -> None:
-        self.scan.stop() if self.scan.state != "idle" else self.scan.start()
+        self.scan.stop() if self.scan.state != "idle" else self._start()
 
     def refresh(self) -> None:
         s = self.scan
@@ -170,25 +172,6 @@ def install_scan(window) -> ScanSession:
     that does not send them is reopened with full frames first."""
     scan = ScanSession(window.session)
     window.scan_session = scan
-    window.scan_panel = panel = ScanPanel(scan)
-    dock = QDockWidget("Scan", window)
-    dock.setObjectName("dock_scan")
-    dock.setWidget(panel)
-    dock.setFeatures(QDockWidget.DockWidgetFeature.DockWidgetMovable | QDockWidget.DockWidgetFeature.DockWidgetFloatable)
-    window.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock)
-    tracking = window.findChild(QDockWidget, "dock_tracking")
-    if tracking is not None:
-        window.tabifyDockWidget(tracking, dock)
-    window.scan_dock = dock
-    overlay = DomeOverlay(window.view, scan)
-    window.scan_overlay = overlay
-
-    def changed():
-        overlay.setVisible(scan.state == "scanning")
-        overlay.update()
-
-    scan.events.changed.connect(changed)
-    window.session.events.frame.connect(lambda _shown: overlay.update() if scan.scanning else None)
 
     def start():
         s = window.session
@@ -204,7 +187,24 @@ def install_scan(window) -> ScanSession:
             return
         scan.start()
 
-    panel.toggle_scan = lambda: scan.stop() if scan.state != "idle" else start()
-    panel.start_button.clicked.disconnect()
-    panel.start_button.clicked.connect(panel.toggle_scan)
+    window.scan_panel = panel = ScanPanel(scan, start)
+    dock = QDockWidget("Scan", window)
+    dock.setObjectName("dock_scan")
+    dock.setWidget(panel)
+    dock.setFeatures(QDockWidget.DockWidgetFeature.DockWidgetMovable
+                     | QDockWidget.DockWidgetFeature.DockWidgetFloatable)
+    window.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock)
+    tracking = window.findChild(QDockWidget, "dock_tracking")
+    if tracking is not None:
+        window.tabifyDockWidget(tracking, dock)
+    window.scan_dock = dock
+    overlay = DomeOverlay(window.view, scan)
+    window.scan_overlay = overlay
+
+    def changed():
+        overlay.setVisible(scan.state == "scanning")
+        overlay.update()
+
+    scan.events.changed.connect(changed)
+    window.session.events.frame.connect(lambda _shown: overlay.update() if scan.scanning else None)
     return scan
