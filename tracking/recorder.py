@@ -22,6 +22,7 @@ import numpy as np
 
 from tracking import depth_stream
 from tracking.camera import Camera
+from tracking.anchors.defaults import DEFAULT_DICTIONARY
 from tracking.errors import SourceError
 from tracking.poses import write_tum
 from tracking.session import FORMAT, AnchorSpec, Session, load_session, parse_anchors
@@ -32,7 +33,8 @@ CODECS = {
     "MJPG": (".avi", (cv2.CAP_FFMPEG, cv2.CAP_OPENCV_MJPEG)),
     "FFV1": (".mkv", (cv2.CAP_FFMPEG,)),
 }
-DEFAULT_ANCHORS = [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0, "length": 0.05}]
+# what `arapp markers aruco` prints by default (docs/markers.md)
+DEFAULT_ANCHORS = [{"kind": "aruco", "dictionary": DEFAULT_DICTIONARY, "id": 0, "length": 0.06}]
 
 
 def prepare_folder(folder: str | Path, force: bool = False) -> Path:

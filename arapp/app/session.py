@@ -34,6 +34,7 @@ from arapp.app.sourcespec import display_name
 from arapp.exchange.meshes import is_mesh_path
 from arapp.pipeline import MODES, load_display_model
 from arapp.placement import Placement, dragged_placement, placement_point_at_pixel
+from tracking.anchors.defaults import DEFAULT_DICTIONARY
 from tracking.session import parse_anchors
 
 RECENT_MAX = 8
@@ -41,7 +42,8 @@ RECENT_MAX = 8
 # in view, not two (the user may have the bed and the marker in the same picture)
 GHOST_MODE = "translucent"
 GHOST_NOTE = "Print preview on the bed: the model on the marker is drawn see-through meanwhile"
-DEFAULT_ANCHORS = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
+# what `arapp markers board` prints by default, so a first sheet is found without editing anchors
+DEFAULT_ANCHORS = [{"kind": "aruco_board", "dictionary": DEFAULT_DICTIONARY, "markers_x": 4, "markers_y": 3,
                     "marker_length": 0.04, "separation": 0.01, "first_id": 0}]
 
 

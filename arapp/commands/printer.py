@@ -1,5 +1,7 @@
 """`arapp printer`: printer profile tasks (the bed anchor)."""
 
+from tracking.anchors.defaults import DEFAULT_DICTIONARY
+
 HELP = "printer profile tasks: enter the bed anchor (where the marker lies on the bed)"
 
 
@@ -12,7 +14,8 @@ def add_arguments(parser):
     p.add_argument("--printer", required=True, help="printer profile JSON to update (must exist unless --create)")
     p.add_argument("--create", action="store_true",
                    help="create the profile from the generic printer when the file does not exist")
-    p.add_argument("--dictionary", default="DICT_4X4_50", help="ArUco dictionary of the bed marker")
+    p.add_argument("--dictionary", default=DEFAULT_DICTIONARY,
+                   help=f"ArUco dictionary of the bed marker (default {DEFAULT_DICTIONARY}, as `arapp markers` prints)")
     p.add_argument("--id", type=int, default=42, help="marker id")
     p.add_argument("--length", type=float, default=0.04, help="marker side in metres")
     how = p.add_mutually_exclusive_group(required=True)

@@ -8,7 +8,7 @@ def add_arguments(parser):
     parser.add_argument("--out", required=True, help="recording folder to create, e.g. recordings/my_desk")
     parser.add_argument("--calibration", help="OpenCV calibration YAML (needed for V4L2 cameras and video files)")
     parser.add_argument("--anchors", help="JSON file with the anchors list (as in session.json); "
-                        "default: the source recording's anchors, else one aruco DICT_4X4_50 id 0 of 0.05 m")
+                        "default: the source recording's anchors, else one aruco DICT_ARUCO_MIP_36h12 id 0 of 0.06 m (what `arapp markers aruco` prints)")
     parser.add_argument("--seconds", type=float, help="stop after this many seconds (default: until Ctrl-C or the end)")
     parser.add_argument("--width", type=int, help="requested camera width")
     parser.add_argument("--height", type=int, help="requested camera height")

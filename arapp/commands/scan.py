@@ -21,7 +21,7 @@ def add_arguments(parser):
     parser.add_argument("--source", help="scan live from a camera instead: v4l2:0, depthai, a video file ...")
     parser.add_argument("--calibration", help="OpenCV calibration YAML for --source cameras that need one")
     parser.add_argument("--anchors", help="JSON file with the anchors list (as in session.json) for --source; "
-                        "default: a recording's own, else one aruco DICT_4X4_50 id 0 of 0.05 m")
+                        "default: a recording's own, else one aruco DICT_ARUCO_MIP_36h12 id 0 of 0.06 m (what `arapp markers aruco` prints)")
     parser.add_argument("--seconds", type=float, default=None, help="with --source (required there): capture for S seconds while circling the object")
     parser.add_argument("-o", "--output", required=True, help="mesh to write: .ply, .stl or .obj")
     parser.add_argument("--print", dest="print_mm", action="store_true",
