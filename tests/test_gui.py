@@ -18,55 +18,25 @@ import cv2
 import numpy as np
 import pytest
 
-from PySide6.QtCore import QSettings, Qt  # noqa: E402
+from gui_helpers import N_FRAMES, TIMEOUT_MS, camera_poses, close_main_window, open_main_window, write_arc_recording
+from PySide6.QtCore import Qt  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "models"
-ANCHORS = [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0, "length": 0.08}]
-N_FRAMES = 24
-TIMEOUT_MS = 30000
-
-
-def camera_poses(n: int) -> list[np.ndarray]:
-    """A slow arc around the marker at ~0.35 m, looking at its centre (world_from_camera)."""
-    from tracking.anchors.render import look_at
-
-    poses = []
-    for i in range(n):
-        a = 0.3 + 0.5 * i / max(n - 1, 1)
-        poses.append(look_at([0.22 * np.cos(a), 0.22 * np.sin(a), 0.28], [0.0, 0.0, 0.0]))
-    return poses
 
 
 @pytest.fixture(scope="session")
 def recording(tmp_path_factory) -> Path:
-    from tracking.anchors.render import render_view
-    from tracking.camera import Camera
-    from tracking.recorder import RecordingWriter
-    from tracking.session import parse_anchors
-
-    folder = tmp_path_factory.mktemp("gui") / "arc"
-    cam = Camera(np.array([[560.0, 0, 322.5], [0, 560.0, 236.5], [0, 0, 1]]), np.zeros(5), 640, 480)
-    anchors = parse_anchors(ANCHORS)
-    with RecordingWriter(folder, cam, 30.0, anchors=ANCHORS, source={"kind": "synthetic"}) as w:
-        for i, pose in enumerate(camera_poses(N_FRAMES)):
-            w.write(render_view(anchors, cam, pose, bgr=True), i / 30.0, pose)
-    return folder
+    return write_arc_recording(tmp_path_factory.mktemp("gui") / "arc")
 
 
 @pytest.fixture
 def window(qtbot, tmp_path):
-    from arapp.gui.main_window import MainWindow
-
-    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    w = MainWindow(settings=settings)
+    w = open_main_window(qtbot, tmp_path)
     w.full_frames = True  # the checks compare full-size composited frames with the frames as captured
-    qtbot.addWidget(w)
     w.show()
     yield w
-    for box in w.open_error_boxes():
-        box.close()
-    w.close()
+    close_main_window(w)
 
 
 def wait_model(qtbot, w, name: str) -> None:

@@ -44,13 +44,6 @@ def charuco_recording(tmp_path_factory):
     return out, session.camera
 
 
-@pytest.fixture()
-def config_dir(tmp_path, monkeypatch):
-    d = tmp_path / "config"
-    monkeypatch.setenv("ARAPP_CONFIG_DIR", str(d))
-    return d
-
-
 def assert_close_to(cam: Camera, truth: Camera):
     # measured on this recording: fx, fy within 0.5 %, the centre within 3 px
     assert abs(cam.fx - truth.fx) / truth.fx < 0.015, (cam.fx, truth.fx)

@@ -7,30 +7,17 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from PySide6.QtCore import QSettings
+from gui_helpers import TIMEOUT_MS, close_main_window, open_main_window
 
-TIMEOUT_MS = 30000
-
-
-@pytest.fixture()
-def config_dir(tmp_path, monkeypatch):
-    d = tmp_path / "config"
-    monkeypatch.setenv("ARAPP_CONFIG_DIR", str(d))
-    return d
 
 
 @pytest.fixture()
 def window(qtbot, tmp_path, config_dir, monkeypatch):
     monkeypatch.setenv("ARAPP_GUI_ENGINE", "threads")
-    from arapp.gui.main_window import MainWindow
-
-    w = MainWindow(settings=QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat))
-    qtbot.addWidget(w)
+    w = open_main_window(qtbot, tmp_path)
     w.show()
     yield w
-    for box in w.open_error_boxes():
-        box.close()
-    w.close()
+    close_main_window(w)
 
 
 @pytest.fixture()

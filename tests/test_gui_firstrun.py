@@ -17,13 +17,6 @@ from tracking.session import parse_anchors
 
 
 @pytest.fixture()
-def config_dir(tmp_path, monkeypatch):
-    d = tmp_path / "config"
-    monkeypatch.setenv("ARAPP_CONFIG_DIR", str(d))
-    return d
-
-
-@pytest.fixture()
 def plain_video(tmp_path):
     """A short video file with no calibration next to it (as a user's phone clip)."""
     path = tmp_path / "clip.avi"

@@ -18,49 +18,24 @@ import numpy as np
 import pytest
 import trimesh
 
-from PySide6.QtCore import QSettings, Qt  # noqa: E402
+from gui_helpers import N_FRAMES, TIMEOUT_MS, camera_poses, open_main_window, write_arc_recording
+from PySide6.QtCore import Qt  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "models"
-ANCHORS = [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0, "length": 0.08}]
-N_FRAMES = 24
-TIMEOUT_MS = 30000
-
-
-def camera_poses(n: int) -> list[np.ndarray]:
-    """A slow arc around the marker at ~0.35 m, looking at its centre (world_from_camera)."""
-    from tracking.anchors.render import look_at
-
-    return [look_at([0.22 * np.cos(a), 0.22 * np.sin(a), 0.28], [0.0, 0.0, 0.0])
-            for a in (0.3 + 0.5 * i / (n - 1) for i in range(n))]
 
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory) -> Path:
-    from tracking.anchors.render import render_view
-    from tracking.camera import Camera
-    from tracking.recorder import RecordingWriter
-    from tracking.session import parse_anchors
-
-    folder = tmp_path_factory.mktemp("habits") / "arc"
-    cam = Camera(np.array([[560.0, 0, 322.5], [0, 560.0, 236.5], [0, 0, 1]]), np.zeros(5), 640, 480)
-    anchors = parse_anchors(ANCHORS)
-    with RecordingWriter(folder, cam, 30.0, anchors=ANCHORS, source={"kind": "synthetic"}) as w:
-        for i, pose in enumerate(camera_poses(N_FRAMES)):
-            w.write(render_view(anchors, cam, pose, bgr=True), i / 30.0, pose)
-    return folder
+    return write_arc_recording(tmp_path_factory.mktemp("habits") / "arc")
 
 
 @pytest.fixture
 def window(qtbot, tmp_path, monkeypatch):
-    from arapp.gui.main_window import MainWindow
-
     monkeypatch.chdir(tmp_path)  # default captures/ and recordings/ land here
-    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    w = MainWindow(settings=settings)
+    w = open_main_window(qtbot, tmp_path)
     w.full_frames = True
     w.error_sink = lambda title, message: None  # errors are checked in w.errors, no boxes
-    qtbot.addWidget(w)
     w.show()
     yield w
     w.close()

@@ -22,10 +22,9 @@ PORTS = [("/dev/ttyS0", "serial port"), ("/dev/ttyACM0", "Original Prusa i3 MK3 
 
 
 @pytest.fixture(autouse=True)
-def config_dir(tmp_path, monkeypatch):
-    d = tmp_path / "config"
-    monkeypatch.setenv("ARAPP_CONFIG_DIR", str(d))
-    return d
+def _own_config(config_dir):
+    """Every test here reads and writes its own config folder (conftest's config_dir)."""
+    return config_dir
 
 
 def test_presets_have_the_makers_build_volumes():

@@ -107,6 +107,23 @@ def resume_on_fresh_printer(job: Path, gcode: Path, **emu_kw):
         return final, ran(emu), preamble
 
 
+def stopped_safely_by(tmp_path, i: int, fault: str, match: str) -> tuple[JobState, int]:
+    """Print make_job() with `fault` at move i; the link must raise PrinterReset (matching `match`)
+    having run exactly the moves before i plus SAFE_STOP, heaters and motors off.
+    Returns the saved job state and i's index in the expected commands."""
+    lines, expected = make_job()
+    job = tmp_path / "job.json"
+    with MarlinPty(faults={move(i): fault}) as emu:
+        p = connect(emu, job_path=job)
+        with pytest.raises(PrinterReset, match=match):
+            bounded(p.print_gcode, lines)
+        p.close()
+        k = expected.index(move(i))
+        assert ran(emu) == expected[:k] + SAFE_STOP
+        assert emu.heaters_off() and not emu.motors_on
+    return JobState.load(job), k
+
+
 # -- 1. one ok lost while the firmware auto-reports temperatures ---------------------------------
 def test_lost_ok_during_autoreport_is_noticed():
     lines, expected = make_job()
@@ -267,17 +284,8 @@ def test_silent_reset_stops_without_replay_and_resumes(tmp_path):
 
 # -- 7. a garbled `Resend: 0` --------------------------------------------------------------------
 def test_garbled_resend_zero_stops_without_replay(tmp_path):
-    lines, expected = make_job()
-    job = tmp_path / "job.json"
-    with MarlinPty(faults={move(15): "resend0"}) as emu:
-        p = connect(emu, job_path=job)
-        with pytest.raises(PrinterReset, match="line 0"):
-            bounded(p.print_gcode, lines)
-        p.close()
-        k = expected.index(move(15))
-        assert ran(emu) == expected[:k] + SAFE_STOP
-        assert emu.heaters_off() and not emu.motors_on
-    assert JobState.load(job).commands_done == k
+    state, k = stopped_safely_by(tmp_path, 15, "resend0", match="line 0")
+    assert state.commands_done == k
 
 
 # -- 8. the job file cannot be written -------------------------------------------------------------
@@ -328,17 +336,7 @@ def test_disk_full_mid_print_finishes_and_says_so(tmp_path, monkeypatch):
 
 # -- 9. a resend request for a line never sent ----------------------------------------------------
 def test_resend_for_a_line_never_sent_stops_safely(tmp_path):
-    lines, expected = make_job()
-    job = tmp_path / "job.json"
-    with MarlinPty(faults={move(12): "resend99999"}) as emu:
-        p = connect(emu, job_path=job)
-        with pytest.raises(PrinterReset, match="99999"):
-            bounded(p.print_gcode, lines)
-        p.close()
-        k = expected.index(move(12))
-        assert ran(emu) == expected[:k] + SAFE_STOP
-        assert emu.heaters_off()
-    state = JobState.load(job)
+    state, k = stopped_safely_by(tmp_path, 12, "resend99999", match="99999")
     assert state.status == "reset" and state.commands_done == k and "99999" in state.message
 
 

@@ -17,16 +17,13 @@ import threading
 import numpy as np
 import pytest
 import trimesh
-from scipy.spatial import cKDTree
+from scan_helpers import WORLD_TO_PRINT_MM, compare_to_truth
 
 pytest.importorskip("skimage", reason="arapp[scan] extra not installed")
 
 from arapp.cli import main  # noqa: E402
 
 pytestmark = pytest.mark.slow
-
-WORLD_TO_PRINT_MM = np.diag([1000.0, -1000.0, -1000.0, 1.0])   # GridBoard frame (m, z into the paper) -> print
-
 
 @pytest.fixture(scope="module")
 def vase_scan(tmp_path_factory):
@@ -44,19 +41,9 @@ def vase_scan(tmp_path_factory):
     return dict(root=root, rec=rec, truth=truth, out=out, nurbs=nurbs)
 
 
-def _samples(mesh, n, seed):
-    pts, _ = trimesh.sample.sample_surface(mesh, n, seed=seed)
-    return pts
-
-
 def test_scan_matches_the_true_vase(vase_scan):
-    mesh = trimesh.load(vase_scan["out"])
-    truth = vase_scan["truth"].mesh.copy()
-    truth.apply_transform(WORLD_TO_PRINT_MM)
+    mesh, scan_pts, d_scan, d_true = compare_to_truth(vase_scan["out"], vase_scan["truth"].mesh)
     assert mesh.is_watertight and mesh.volume > 0
-    scan_pts, true_pts = _samples(mesh, 30000, 0), _samples(truth, 30000, 1)
-    d_scan = cKDTree(true_pts).query(scan_pts)[0]          # mm: scan -> truth (accuracy, clutter)
-    d_true = cKDTree(scan_pts).query(true_pts)[0]          # mm: truth -> scan (completeness)
     print(f"accuracy median {np.median(d_scan):.2f} mm p90 {np.percentile(d_scan, 90):.2f} mm; "
           f"completeness(2 mm) {np.mean(d_true < 2):.3f}; volume {mesh.volume / 1000:.1f} cm3 "
           f"(true {vase_scan['truth'].volume * 1e6:.1f}); extents {mesh.extents}")

@@ -15,17 +15,13 @@ import time
 
 import numpy as np
 import pytest
-import trimesh
-from scipy.spatial import cKDTree
+from scan_helpers import compare_to_truth
 
 pytest.importorskip("skimage", reason="arapp[scan] extra not installed")
 
 from arapp.cli import main  # noqa: E402
 
 pytestmark = pytest.mark.slow
-
-WORLD_TO_PRINT_MM = np.diag([1000.0, -1000.0, -1000.0, 1.0])   # GridBoard frame (m, z into the paper) -> print
-
 
 @pytest.fixture(scope="module")
 def depth_scan(tmp_path_factory):
@@ -52,14 +48,8 @@ def depth_scan(tmp_path_factory):
 
 
 def test_depth_scan_matches_the_true_vase_without_matching(depth_scan):
-    mesh = trimesh.load(depth_scan["out"])
-    truth = depth_scan["truth"].mesh.copy()
-    truth.apply_transform(WORLD_TO_PRINT_MM)
+    mesh, _, d_scan, d_true = compare_to_truth(depth_scan["out"], depth_scan["truth"].mesh)
     assert mesh.is_watertight and mesh.volume > 0
-    scan_pts, _ = trimesh.sample.sample_surface(mesh, 30000, seed=0)
-    true_pts, _ = trimesh.sample.sample_surface(truth, 30000, seed=1)
-    d_scan = cKDTree(true_pts).query(scan_pts)[0]          # mm: scan -> truth (accuracy, clutter)
-    d_true = cKDTree(scan_pts).query(true_pts)[0]          # mm: truth -> scan (completeness)
     print(f"depth scan in {depth_scan['wall']:.1f} s: accuracy median {np.median(d_scan):.2f} mm "
           f"p90 {np.percentile(d_scan, 90):.2f} mm; completeness(2 mm) {np.mean(d_true < 2):.3f}; "
           f"volume {mesh.volume / 1000:.2f} cm3 (true {depth_scan['truth'].volume * 1e6:.2f})")

@@ -10,25 +10,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from PySide6.QtCore import Qt
-from PySide6.QtGui import QAction, QKeySequence
+from PySide6.QtGui import QKeySequence
 from PySide6.QtWidgets import QFileDialog, QPushButton
 
 from arapp.app.capture import new_capture_path
 from arapp.app.model_export import export_filter, export_suffixes
 from arapp.app.window_state import control_state, window_title
-
-
-def _action(window, text: str, slot, shortcut=None, menu=None) -> QAction:
-    a = QAction(text, window)
-    if shortcut is not None:
-        a.setShortcut(QKeySequence(shortcut))
-        a.setShortcutContext(Qt.ShortcutContext.WindowShortcut)
-    a.triggered.connect(slot)
-    window.addAction(a)
-    if menu is not None:
-        menu.addAction(a)
-    return a
+from arapp.gui.menus import _action
 
 
 def _menu(window, title: str):
