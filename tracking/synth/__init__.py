@@ -7,6 +7,7 @@ Presets: tracking.synth.presets; CLI: `arapp synth`.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 from typing import Callable
@@ -42,7 +43,12 @@ def synthesize(scene, out: str | Path, force: bool = False, max_frames: int | No
     renderer = DeskRenderer(scene)
     n = scene.frame_count if max_frames is None else min(max_frames, scene.frame_count)
     source = {"kind": "synthetic", "generator": "arapp synth", "scene": json.loads(json.dumps(scene.to_dict()))}
-    with RecordingWriter(out, scene.camera, scene.fps, scene.anchor_blocks, source, scene.fourcc, scene.quality,
+    # the camera that "recorded" it states its rolling-shutter readout, as a calibration that measured it would
+    camera = scene.camera
+    readout = float(scene.effects.get("rolling_shutter") or 0.0)
+    if readout > 0:
+        camera = dataclasses.replace(camera, readout=readout)
+    with RecordingWriter(out, camera, scene.fps, scene.anchor_blocks, source, scene.fourcc, scene.quality,
                          force) as writer:
         for i in range(n):
             img, pose, t = renderer.render(i)
