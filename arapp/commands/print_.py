@@ -171,9 +171,42 @@ def _check_job_file(job_path: Path, state) -> None:
                       "nothing was sent: choose a writable place with --job") from exc
 
 
+def _check_link_args(args) -> None:
+    """One link, a window of at least one line, a timeout under a day; ValueError naming the option otherwise."""
+    if args.port and args.octoprint:
+        raise ValueError("give either --port (USB serial) or --octoprint URL, not both")
+    if args.window < 1:
+        raise ValueError(f"--window must be at least 1 line, got {args.window}")
+    if not (0 < args.timeout < 86400):
+        raise ValueError(f"--timeout must be between 0 and 86400 seconds, got {args.timeout}")
+
+
+def _job_to_resume(args, profile):
+    """The job state to resume (None for a new print) and the file to print (G-code or a model to slice).
+
+    With --resume the job file is checked (resumable, the right printer) and
+    becomes --job unless one was given; the G-code is the job's own unless given.
+    """
+    # lazy like every command module's imports: `arapp --help` stays fast
+    from arapp.printing.link.job import JobState, check_resumable
+
+    if not args.resume:
+        if args.input is None:
+            raise ValueError("nothing to print: give a G-code file or a model (or --resume JOB.json)")
+        return None, Path(args.input)
+    if args.octoprint:
+        raise ValueError("--resume works with the serial link (--port) only")
+    state = JobState.load(args.resume, profile)
+    check_resumable(state, args.resume, after_halt=args.after_halt)
+    if state.status == "halted":
+        print(f"resuming after a printer halt: {state.message}", file=sys.stderr)
+    args.job = args.job or args.resume
+    return state, Path(args.input or state.gcode)
+
+
 def run(args) -> int:
     from arapp.printing.link.factory import OctoPrintTarget, SerialTarget, make_link
-    from arapp.printing.link.job import JobState, Program, check_resumable, resume_commands
+    from arapp.printing.link.job import Program, resume_commands
 
     if args.save_key:
         from arapp.printing.link.octoprint import save_api_key
@@ -184,13 +217,7 @@ def run(args) -> int:
             args.api_key_file = str(path)
         if args.input is None and args.resume is None:
             return 0
-    if args.port and args.octoprint:
-        raise ValueError("give either --port (USB serial) or --octoprint URL, not both")
-    if args.window < 1:
-        raise ValueError(f"--window must be at least 1 line, got {args.window}")
-    if not (0 < args.timeout < 86400):
-        raise ValueError(f"--timeout must be between 0 and 86400 seconds, got {args.timeout}")
-
+    _check_link_args(args)
     profile = None
     if args.printer is not None or args.resume or (not args.octoprint and not args.port) or (
             args.input and Path(args.input).suffix.lower() not in GCODE_SUFFIXES):
@@ -198,21 +225,7 @@ def run(args) -> int:
 
         profile = load_profile(args.printer)
 
-    state = None
-    if args.resume:
-        if args.octoprint:
-            raise ValueError("--resume works with the serial link (--port) only")
-        state = JobState.load(args.resume, profile)
-        check_resumable(state, args.resume, after_halt=args.after_halt)
-        if state.status == "halted":
-            print(f"resuming after a printer halt: {state.message}", file=sys.stderr)
-        gcode_path = Path(args.input or state.gcode)
-        args.job = args.job or args.resume
-    elif args.input is None:
-        raise ValueError("nothing to print: give a G-code file or a model (or --resume JOB.json)")
-    else:
-        gcode_path = Path(args.input)
-
+    state, gcode_path = _job_to_resume(args, profile)
     if gcode_path.suffix.lower() not in GCODE_SUFFIXES:
         gcode_path = _slice_model(args, profile)
     if not gcode_path.is_file():

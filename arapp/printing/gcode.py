@@ -89,108 +89,121 @@ class GcodeStats:
     layers: int
 
 
-def write_gcode(layers: list[LayerToolpaths], settings, profile, header: list[str] | None = None) -> tuple[str, GcodeStats]:
-    """Marlin G-code for the layers' toolpaths, with travel, retraction and z-hop between paths.
+class _GcodeBody:
+    """The moves of one print as they are written: extruder position, retraction, nozzle position, time.
 
-    `e` below is the extruder position while not retracted; a retraction moves
-    it retract_length lower and the un-retraction back. E (mm of filament,
-    absolute, reset to 0 each layer) = line width x layer height x length
-    / filament cross-section. Returns the text and its statistics (also written in the header).
+    `e` is the extruder position while not retracted (mm of filament, absolute,
+    reset to 0 each layer); a retraction moves it retract_length lower and the
+    un-retraction back. `time_s` adds up the estimated seconds of every move.
     """
-    mat = settings.material_info
-    speeds = settings.speeds()
-    accel = settings.acceleration
-    area = profile.filament_area
-    travel_f = speeds["travel"] * 60.0
-    retract_f = settings.retract_speed * 60.0
-    body: list[str] = []
-    emit = body.append
-    e = 0.0
-    filament = 0.0
-    time_s = 0.0
-    pos = None
-    retracted = False
-    z_now = 0.0
-    fan_on = False
 
-    def travel_to(xy, z):
-        nonlocal retracted, pos, time_s
+    def __init__(self, settings, profile):
+        self.settings, self.profile = settings, profile
+        self.speeds = settings.speeds()
+        self.accel = settings.acceleration
+        self.area = profile.filament_area
+        self.travel_f = self.speeds["travel"] * 60.0
+        self.retract_f = settings.retract_speed * 60.0
+        self.lines: list[str] = []
+        self.emit = self.lines.append
+        self.e = 0.0
+        self.filament = 0.0
+        self.time_s = 0.0
+        self.pos = None
+        self.retracted = False
+        self.z_now = 0.0
+        self.fan_on = False
+
+    def travel_to(self, xy, z) -> None:
+        """Travel to xy at height z: retract and hop first when the travel is long, un-retract after."""
+        st, speeds, accel, emit = self.settings, self.speeds, self.accel, self.emit
+        pos = self.pos
         dist = math.hypot(xy[0] - pos[0], xy[1] - pos[1]) if pos is not None else float("inf")
-        long_travel = dist > settings.retract_min_travel
-        if long_travel and settings.retract_length > 0 and not retracted and pos is not None:
-            emit(f"G1 E{e - settings.retract_length:.5f} F{retract_f:.0f}")
-            time_s += settings.retract_length / settings.retract_speed
-            retracted = True
-        hop = long_travel and settings.z_hop > 0 and pos is not None
+        long_travel = dist > st.retract_min_travel
+        if long_travel and st.retract_length > 0 and not self.retracted and pos is not None:
+            emit(f"G1 E{self.e - st.retract_length:.5f} F{self.retract_f:.0f}")
+            self.time_s += st.retract_length / st.retract_speed
+            self.retracted = True
+        hop = long_travel and st.z_hop > 0 and pos is not None
         if hop:
-            emit(f"G1 Z{z + settings.z_hop:.3f} F{travel_f:.0f}")
-            time_s += _move_time1(settings.z_hop, min(speeds["travel"], 10.0), accel)
+            emit(f"G1 Z{z + st.z_hop:.3f} F{self.travel_f:.0f}")
+            self.time_s += _move_time1(st.z_hop, min(speeds["travel"], 10.0), accel)
         if dist > 1e-9:
-            emit(f"G0 X{xy[0]:.3f} Y{xy[1]:.3f} F{travel_f:.0f}")
+            emit(f"G0 X{xy[0]:.3f} Y{xy[1]:.3f} F{self.travel_f:.0f}")
             if math.isfinite(dist):
-                time_s += _move_time1(dist, speeds["travel"], accel)
+                self.time_s += _move_time1(dist, speeds["travel"], accel)
         if hop:
-            emit(f"G1 Z{z:.3f} F{travel_f:.0f}")
-            time_s += _move_time1(settings.z_hop, min(speeds["travel"], 10.0), accel)
-        if retracted:
-            emit(f"G1 E{e:.5f} F{retract_f:.0f}")
-            time_s += settings.retract_length / settings.retract_speed
-            retracted = False
-        pos = xy
+            emit(f"G1 Z{z:.3f} F{self.travel_f:.0f}")
+            self.time_s += _move_time1(st.z_hop, min(speeds["travel"], 10.0), accel)
+        if self.retracted:
+            emit(f"G1 E{self.e:.5f} F{self.retract_f:.0f}")
+            self.time_s += st.retract_length / st.retract_speed
+            self.retracted = False
+        self.pos = xy
 
-    for layer in layers:
+    def start_layer(self, layer: LayerToolpaths) -> None:
+        """Layer comments, the fan from layer 1, retract, rise to the layer's z and reset E."""
+        st, emit = self.settings, self.emit
         emit(f";LAYER:{layer.index}")
         emit(f";Z:{layer.z:.3f}")
         emit(f";HEIGHT:{layer.height:.3f}")
-        if layer.index == 1 and settings.fan_percent() > 0 and not fan_on:
-            emit(f"M106 S{round(255 * settings.fan_percent() / 100)}")
-            fan_on = True
-        if pos is not None and settings.retract_length > 0 and not retracted:
-            emit(f"G1 E{e - settings.retract_length:.5f} F{retract_f:.0f}")
-            retracted = True
-        emit(f"G1 Z{layer.z:.3f} F{min(travel_f, 600.0):.0f}")
-        time_s += _move_time1(abs(layer.z - z_now), 10.0, accel)
-        z_now = layer.z
+        if layer.index == 1 and st.fan_percent() > 0 and not self.fan_on:
+            emit(f"M106 S{round(255 * st.fan_percent() / 100)}")
+            self.fan_on = True
+        if self.pos is not None and st.retract_length > 0 and not self.retracted:
+            emit(f"G1 E{self.e - st.retract_length:.5f} F{self.retract_f:.0f}")
+            self.retracted = True
+        emit(f"G1 Z{layer.z:.3f} F{min(self.travel_f, 600.0):.0f}")
+        self.time_s += _move_time1(abs(layer.z - self.z_now), 10.0, self.accel)
+        self.z_now = layer.z
         # E restarts from 0 each layer; while retracted the filament sits retract_length below that
-        emit(f"G92 E{-settings.retract_length:.5f}" if retracted else "G92 E0")
-        e = 0.0
+        emit(f"G92 E{-st.retract_length:.5f}" if self.retracted else "G92 E0")
+        self.e = 0.0
+
+    def layer_paths(self, layer: LayerToolpaths) -> None:
+        """The layer's paths in order, each reached by travel_to, with a ;TYPE: comment where the kind changes."""
         kind_now = None
         if not layer.paths:
-            continue
-        plan = _layer_arrays(layer, speeds, area, accel)
-        time_s += plan["time"]
-        filament += plan["filament"]
+            return
+        plan = _layer_arrays(layer, self.speeds, self.area, self.accel)
+        self.time_s += plan["time"]
+        self.filament += plan["filament"]
         lines, first, es, starts = plan["lines"], plan["first_line"], plan["e_end"], plan["start_xy"]
         for i, path in enumerate(layer.paths):
-            e = plan["e_start"][i]
-            travel_to(starts[i], layer.z)
+            self.e = plan["e_start"][i]
+            self.travel_to(starts[i], layer.z)
             if path.kind != kind_now:
-                emit(f";TYPE:{KIND_TYPES[path.kind]}")
+                self.emit(f";TYPE:{KIND_TYPES[path.kind]}")
                 kind_now = path.kind
-            emit(plan["feed"][i])
-            body.extend(lines[first[i]:first[i + 1]])
-            e = es[i]
-            pos = plan["end_xy"][i]
-    # end: retract, lift clear of the part, then the printer's end code
-    if settings.retract_length > 0 and not retracted:
-        e -= settings.retract_length
-        emit(f"G1 E{e:.5f} F{retract_f:.0f}")
-    if layers:
-        emit(f"G1 Z{min(z_now + 10.0, profile.bed.height):.3f} F{min(travel_f, 600.0):.0f}")
-    emit("M107")
+            self.emit(plan["feed"][i])
+            self.lines.extend(lines[first[i]:first[i + 1]])
+            self.e = es[i]
+            self.pos = plan["end_xy"][i]
 
-    grams = filament * area * mat.density / 1000.0
-    stats = GcodeStats(print_time_s=time_s, filament_mm=filament, filament_g=grams, layers=len(layers))
+    def finish(self, any_layers: bool) -> None:
+        """End of the moves: retract, lift clear of the part, fan off (the printer's end code follows)."""
+        st = self.settings
+        if st.retract_length > 0 and not self.retracted:
+            self.e -= st.retract_length
+            self.emit(f"G1 E{self.e:.5f} F{self.retract_f:.0f}")
+        if any_layers:
+            self.emit(f"G1 Z{min(self.z_now + 10.0, self.profile.bed.height):.3f} F{min(self.travel_f, 600.0):.0f}")
+        self.emit("M107")
+
+
+def _gcode_head(settings, profile, stats: GcodeStats, header: list[str] | None) -> list[str]:
+    """The header comments (printer, material, estimates, settings) and the start sequence: heat, home, modes."""
+    mat = settings.material_info
     hot, bed = settings.hotend(), settings.bed()
     head = [
         "; generated by arapp built-in slicer",
         f"; printer = {profile.name}",
         f"; material = {mat.name} (density {mat.density} g/cm3)",
-        f"; estimated printing time (s) = {time_s:.0f}",
-        f"; estimated printing time = {format_duration(time_s)}",
-        f"; filament used [mm] = {filament:.2f}",
-        f"; filament used [g] = {grams:.2f}",
-        f"; layer count = {len(layers)}",
+        f"; estimated printing time (s) = {stats.print_time_s:.0f}",
+        f"; estimated printing time = {format_duration(stats.print_time_s)}",
+        f"; filament used [mm] = {stats.filament_mm:.2f}",
+        f"; filament used [g] = {stats.filament_g:.2f}",
+        f"; layer count = {stats.layers}",
         f"; layer height = {settings.layer_height}, first layer height = {settings.first_layer_height}",
         f"; line width = {settings.width(profile.nozzle_diameter)}, perimeters = {settings.perimeters}, "
         f"infill = {settings.infill:g}% {settings.infill_pattern}",
@@ -206,8 +219,25 @@ def write_gcode(layers: list[LayerToolpaths], settings, profile, header: list[st
         head.append(f"M190 S{bed:.0f} ; wait for bed")
     head += [f"M109 S{hot:.0f} ; wait for hotend", "G21 ; millimetres", "G90 ; absolute positions",
              "M82 ; absolute extrusion", "G92 E0"]
-    tail = profile.end_gcode.splitlines()
-    return "\n".join(head + body + tail) + "\n", stats
+    return head
+
+
+def write_gcode(layers: list[LayerToolpaths], settings, profile, header: list[str] | None = None) -> tuple[str, GcodeStats]:
+    """Marlin G-code for the layers' toolpaths, with travel, retraction and z-hop between paths.
+
+    E (mm of filament, absolute, reset to 0 each layer) = line width x layer
+    height x length / filament cross-section (see `_GcodeBody`). Returns the
+    text and its statistics (also written in the header).
+    """
+    body = _GcodeBody(settings, profile)
+    for layer in layers:
+        body.start_layer(layer)
+        body.layer_paths(layer)
+    body.finish(bool(layers))
+    grams = body.filament * body.area * settings.material_info.density / 1000.0
+    stats = GcodeStats(print_time_s=body.time_s, filament_mm=body.filament, filament_g=grams, layers=len(layers))
+    head = _gcode_head(settings, profile, stats, header)
+    return "\n".join(head + body.lines + profile.end_gcode.splitlines()) + "\n", stats
 
 
 # ---------------------------------------------------------------- parser
@@ -263,6 +293,27 @@ class GcodeLayer:
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
 
 
+def _read_comment(c: str, marker: str | None, layers: list[GcodeLayer], z_comment: float, kind: str) -> tuple[float, str]:
+    """Apply one comment (text after `;`) to the parse: a layer start is appended to `layers`, a `;Z:`
+    sets the open layer's z (or is kept for the next layer), a `;TYPE:` sets the feature kind.
+    Returns the (z_comment, kind) that hold after it."""
+    if (marker == ";LAYER:" and c.startswith("LAYER:")) or (marker == ";LAYER_CHANGE" and c == "LAYER_CHANGE"):
+        layers.append(GcodeLayer(index=len(layers), z=z_comment))
+        return math.nan, kind
+    if c.startswith("Z:"):
+        try:
+            zc = float(c[2:])
+        except ValueError:
+            return z_comment, kind
+        if layers and math.isnan(layers[-1].z):
+            layers[-1].z = zc
+            return z_comment, kind
+        return zc, kind
+    if c.startswith("TYPE:"):
+        return z_comment, feature_kind(c[5:])
+    return z_comment, kind
+
+
 def parse_gcode(text: str) -> list[GcodeLayer]:
     """Layers of G-code text with their moves (G0/G1 in G90/G91 and M82/M83, G92 respected).
 
@@ -283,21 +334,7 @@ def parse_gcode(text: str) -> list[GcodeLayer]:
         if not line:
             continue
         if line[0] == ";":
-            c = line[1:].strip()
-            if (marker == ";LAYER:" and c.startswith("LAYER:")) or (marker == ";LAYER_CHANGE" and c == "LAYER_CHANGE"):
-                layers.append(GcodeLayer(index=len(layers), z=z_comment))
-                z_comment = math.nan
-            elif c.startswith("Z:"):
-                try:
-                    zc = float(c[2:])
-                except ValueError:
-                    continue
-                if layers and math.isnan(layers[-1].z):
-                    layers[-1].z = zc
-                else:
-                    z_comment = zc
-            elif c.startswith("TYPE:"):
-                kind = feature_kind(c[5:])
+            z_comment, kind = _read_comment(line[1:].strip(), marker, layers, z_comment, kind)
             continue
         code = line.split(";", 1)[0].strip()
         if not code:

@@ -53,6 +53,15 @@ log = logging.getLogger("arapp.printing.octoprint")
 _LAYER = re.compile(rb";\s*LAYER\s*:\s*(-?\d+)", re.IGNORECASE)
 
 
+
+def _layer_offsets(data: bytes) -> tuple[list[int], list[int]]:
+    """Byte offset and number of each layer comment in the G-code, to turn OctoPrint's file position into a layer."""
+    offsets, layers = [], []
+    for m in _LAYER.finditer(data):
+        offsets.append(m.start())
+        layers.append(int(m.group(1)))
+    return offsets, layers
+
 class OctoPrintError(LinkError):
     """OctoPrint refused a request or could not be reached."""
 
@@ -233,11 +242,7 @@ class OctoPrintLink(PrintLink):
         state.port = self.url
         state.status = PRINTING
         self.state = state
-        # Byte offset of each layer comment, to turn OctoPrint's file position into a layer.
-        offsets, layers = [], []
-        for m in _LAYER.finditer(data):
-            offsets.append(m.start())
-            layers.append(int(m.group(1)))
+        offsets, layers = _layer_offsets(data)
         name = Path(gcode_path).name if gcode_path else self.name
         info = self.upload(data, name=name, start=True)
         uploaded = ((info.get("files") or {}).get("local") or {}).get("name", name)
@@ -274,23 +279,8 @@ class OctoPrintLink(PrintLink):
             if "heat" in low:
                 kind = HEATING
             elapsed = time.monotonic() - t0
-            if low.startswith("error") or low.startswith("offline after error"):
-                state.status, state.message = "halted", job.get("error") or text
-                self._finish(state, progress, elapsed)
-                raise PrinterHalted(f"OctoPrint reports a printer error: {state.message}", state, self.job_path)
-            if low.startswith(("offline", "closed")):
-                state.status, state.message = "link_lost", f"OctoPrint lost its printer ({text})"
-                self._finish(state, progress, elapsed)
-                raise LinkLost(state.message, state, self.job_path)
-            if low.startswith("operational") and (started or (ours and completion is not None)):
-                if cancelling or (completion is not None and completion < 100.0):
-                    state.status = CANCELLED
-                else:
-                    state.status = DONE
-                    state.commands_done = state.commands_total
-                    if layers:
-                        state.layer = layers[-1]
-                self._finish(state, progress, elapsed)
+            back = low.startswith("operational") and (started or (ours and completion is not None))
+            if self._job_ended(state, job, text, back, cancelling, completion, layers, progress, elapsed):
                 return state
             if progress is not None:
                 left = prog.get("printTimeLeft")
@@ -303,6 +293,32 @@ class OctoPrintLink(PrintLink):
                 ))
             # Wait for the next poll; cancel() from another thread wakes it early.
             (never if cancelling else self._cancel_req).wait(self.poll_interval)
+
+    def _job_ended(self, state: JobState, job: dict, text: str, back: bool, cancelling: bool,
+                   completion: float | None, layers: list[int], progress, elapsed: float) -> bool:
+        """Whether OctoPrint's job state `text` ends our job: raises PrinterHalted or LinkLost on a printer
+        error or a lost printer; when the printer is `back` to operational after our job, sets `state`
+        to cancelled or done and returns True. Calls _finish(state, ...) in every ending."""
+        low = text.lower()
+        if low.startswith("error") or low.startswith("offline after error"):
+            state.status, state.message = "halted", job.get("error") or text
+            self._finish(state, progress, elapsed)
+            raise PrinterHalted(f"OctoPrint reports a printer error: {state.message}", state, self.job_path)
+        if low.startswith(("offline", "closed")):
+            state.status, state.message = "link_lost", f"OctoPrint lost its printer ({text})"
+            self._finish(state, progress, elapsed)
+            raise LinkLost(state.message, state, self.job_path)
+        if not back:
+            return False
+        if cancelling or (completion is not None and completion < 100.0):
+            state.status = CANCELLED
+        else:
+            state.status = DONE
+            state.commands_done = state.commands_total
+            if layers:
+                state.layer = layers[-1]
+        self._finish(state, progress, elapsed)
+        return True
 
     def _read_temperatures(self) -> None:
         try:
