@@ -107,6 +107,7 @@ class AnchorTracker:
         self.full_every = max(int(full_every), 1)
         self.track_markers = bool(track_markers)
         self.track_max_rms = 1.0  # px: a tracked (not detected) solution worse than this is re-detected
+        self.deskew_extrapolate_min = 12  # points (three markers' corners): see _deskew
         self._tracked_only = False
         self.outlier_px = float(outlier_px)
         self.branch_decay = float(branch_decay)
@@ -122,6 +123,8 @@ class AnchorTracker:
         self._last_pts: dict = {}      # (anchor, object point key) -> last frame's detected pixel
         self._last_pts_t: float | None = None
         self._prev_pts: tuple = ({}, None)
+        self._fields: dict = {}        # anchor -> (this frame's affine image-velocity field, its dt)
+        self._prev_fields: dict = {}
         self.branch_evidence = 0.0
         self._alternative = None
         self.tracked_keys: set[tuple[int, int]] = set()
@@ -250,14 +253,20 @@ class AnchorTracker:
         moving across the image at u' pixels/s was seen `u' d` from where the centre row would have
         seen it. u' is the point's own image velocity since the last frame (its detections in both
         frames), fitted as an affine field over the anchor's points: far less noisy than a velocity
-        from two poses, whose tilt noise barely moves the image. First order in d; points of an anchor
-        not seen in the last frame are left as they are. Also remembers this frame's points.
+        from two poses, whose tilt noise barely moves the image. That difference is the velocity half a
+        frame before the frame time; when the anchor's field was also fitted in the last frame, from at
+        least `deskew_extrapolate_min` points (fewer make the difference of two fields too noisy), the
+        change between the two fields carries it on to the frame time (the image acceleration of a
+        hand-held camera is what the half-frame lag otherwise leaves in the corners). First order in d;
+        points of an anchor not seen in the last frame are left as they are. Also remembers this frame's
+        points and fields.
         """
         cam = self.camera
         if cam.readout <= 0:
             return obs
         if self._last_pts_t != t:   # (a second detection pass of the same frame compares with the last frame too)
             self._prev_pts = (self._last_pts, self._last_pts_t)
+            self._prev_fields, self._fields = self._fields, {}
         prev, prev_t = self._prev_pts
         self._last_pts = {(ob.anchor, *np.round(o * 1e5).astype(int)): px
                           for ob in obs for o, px in zip(ob.obj, ob.img)}
@@ -277,6 +286,13 @@ class AnchorTracker:
             X = np.c_[img[seen], np.ones(int(seen.sum()))]
             A, *_ = np.linalg.lstsq(X, vel, rcond=None)
             vel_all = np.c_[img, np.ones(len(img))] @ A
+            self._fields[ob.anchor] = (A, dt)
+            before = self._prev_fields.get(ob.anchor)
+            if before is not None and seen.sum() >= self.deskew_extrapolate_min:
+                # the difference is the velocity half a frame ago (dt/2); the change from the last frame's
+                # difference, (dt + dt_before)/2 earlier, carries it on to the frame time
+                vel_before = np.c_[img, np.ones(len(img))] @ before[0]
+                vel_all = vel_all + dt / (dt + before[1]) * (vel_all - vel_before)
             d = cam.readout * ((img[:, 1] + 0.5) / cam.height - 0.5)
             out.append(Observation(ob.anchor, ob.obj, img - vel_all * d[:, None], ob.groups, ob.markers,
                                    square=ob.square))
