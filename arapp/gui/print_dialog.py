@@ -19,6 +19,7 @@ from dataclasses import replace
 from arapp.app import printlink
 from arapp.app.bed_fit import bed_fit, size_text
 from arapp.app.print_session import PrintSession, prune_slices
+from arapp.gui.print_setup_prefill import prefill, with_setup_key
 from arapp.gui.print_widgets import (
     OTHER_PROFILE, preview_box, restore_settings, send_box, settings_values, slicing_box,
 )
@@ -87,6 +88,7 @@ class PrintDialog(QDialog):
         restore_settings(self, settings)
         self.profile.currentIndexChanged.connect(self.check_fit)
         self.refresh_ports()
+        self.print_label.setText(prefill(self))  # the saved Printer set-up: its port or server, not asked again
         ps.make_solid()
 
     # -- the session's state, as the window and tests read it --------------------------------
@@ -299,7 +301,8 @@ class PrintDialog(QDialog):
     def target(self):
         """The printer chosen in the dialog (printlink.SerialTarget or OctoPrintTarget)."""
         if self.use_octoprint.isChecked():
-            return printlink.OctoPrintTarget(self.octoprint_url.text().strip(), self.api_key_file.text().strip())
+            return with_setup_key(printlink.OctoPrintTarget(self.octoprint_url.text().strip(),
+                                                            self.api_key_file.text().strip()))
         text = self.baud.currentText()
         try:
             baud = int(text)
