@@ -26,6 +26,9 @@ from typing import Callable
 import numpy as np
 import trimesh
 
+from arapp.scan import depth as dpt
+from arapp.scan import fusion as fu
+from arapp.scan.refine import refine_poses
 from arapp.scan.views import ScanCancelled, View, look_at_point, select_views, track_views
 
 Progress = Callable[[str, int, int], None]
@@ -75,17 +78,37 @@ def _check(cancel):
 def scan(source, camera, anchors, options: ScanOptions | None = None, progress: Progress | None = None,
          cancel=None) -> ScanResult:
     """Reconstruct the object standing on the first anchor from the frames of `source`."""
-    from arapp.scan import depth as dpt
-    from arapp.scan import fusion as fu
-
     opt = options or ScanOptions()
     timings, stats = {}, {}
     t = time.perf_counter()
+    views, chosen, use_depth = _choose_views(source, camera, anchors, opt, progress, cancel, stats)
+    timings["track_s"] = time.perf_counter() - t
+    K = camera.K.copy()
+    t = time.perf_counter()
+    poses = _refined_poses(chosen, K, anchors, opt, progress, cancel, stats)
+    timings["refine_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    frame = fu.board_frame(anchors)
+    maps = _depth_maps(chosen, poses, K, frame, use_depth, opt, progress, cancel)
+    stats["depth_maps"] = len(maps)
+    timings["depth_s"] = time.perf_counter() - t
+    if len(maps) < 2:
+        raise RuntimeError("the depth maps do not agree; is the object textured, and the board flat?")
+    t = time.perf_counter()
+    mesh = _fused_mesh(maps, frame, opt, progress, cancel, stats)
+    timings["fuse_s"] = time.perf_counter() - t
+    return ScanResult(mesh, chosen, poses, len(views), timings, stats)
+
+
+def _choose_views(source, camera, anchors, opt: ScanOptions, progress, cancel, stats: dict):
+    """Track every frame, then choose sharp views from different directions.
+
+    Returns (views tracked, views chosen, whether the chosen views' measured depth is used).
+    """
     # every frame is tracked, but only up to `keep_frames` evenly spread ones are kept in memory as candidates
     total = getattr(source, "frame_count", 0) or 0
     every = max(1, -(-total // opt.keep_frames)) if total else 1
     views = track_views(source, camera, anchors, progress, cancel, opt.max_frames, every=every)
-    timings["track_s"] = time.perf_counter() - t
     if len(views) < 3:
         raise RuntimeError(f"only {len(views)} frames were placed from the markers; keep the board in view "
                            "while circling the object")
@@ -97,26 +120,29 @@ def scan(source, camera, anchors, options: ScanOptions | None = None, progress: 
     if len(chosen) < 3:
         raise RuntimeError("fewer than 3 sharp views from different directions; circle the object more slowly")
     stats["views"] = len(chosen)
-    K = camera.K.copy()
+    return views, chosen, use_depth
+
+
+def _refined_poses(chosen, K, anchors, opt: ScanOptions, progress, cancel, stats: dict) -> list[np.ndarray]:
+    """The chosen views' poses (world_from_camera), bundle-adjusted on matched features when opt.refine."""
     poses = [v.pose for v in chosen]
-    t = time.perf_counter()
-    if opt.refine:
-        _check(cancel)
-        if progress:
-            progress("refining poses", 0, 1)
-        from arapp.scan.refine import refine_poses
+    if not opt.refine:
+        return poses
+    _check(cancel)
+    if progress:
+        progress("refining poses", 0, 1)
+    ref = refine_poses(chosen, K, anchors)
+    stats.update(ba_rms_before_px=ref.rms_before, ba_rms_after_px=ref.rms_after, ba_tracks=ref.tracks,
+                 ba_moved_mm=ref.moved_m * 1000, ba_turned_deg=ref.turned_deg)
+    if progress:
+        progress("refining poses", 1, 1)
+    return ref.poses
 
-        ref = refine_poses(chosen, K, anchors)
-        poses = ref.poses
-        stats.update(ba_rms_before_px=ref.rms_before, ba_rms_after_px=ref.rms_after, ba_tracks=ref.tracks,
-                     ba_moved_mm=ref.moved_m * 1000, ba_turned_deg=ref.turned_deg)
-        if progress:
-            progress("refining poses", 1, 1)
-    timings["refine_s"] = time.perf_counter() - t
 
-    t = time.perf_counter()
+def _depth_maps(chosen, poses, K, frame, use_depth: bool, opt: ScanOptions, progress, cancel) -> list:
+    """Depth maps of the chosen views (measured, or by stereo matching of pairs), kept only where they
+    see what stands on the board and (for matched maps) where enough maps agree; sparse maps dropped."""
     target = look_at_point(chosen)
-    frame = fu.board_frame(anchors)
     # depth search range: what lies within the board's reach of the look-at point (disparity range = time)
     reach = float(np.max(np.linalg.norm(frame.to_world(np.c_[frame.outline, np.zeros(len(frame.outline))])
                                         - target, axis=1))) + opt.z_margin
@@ -158,13 +184,11 @@ def scan(source, camera, anchors, options: ScanOptions | None = None, progress: 
             dm.depth.ravel()[flat[~on_board(X)]] = 0
     else:
         dpt.filter_consistent(maps, min_agree=opt.min_agree, keep=on_board)
-    maps = [m for m in maps if np.count_nonzero(m.depth) > 500]
-    stats["depth_maps"] = len(maps)
-    timings["depth_s"] = time.perf_counter() - t
-    if len(maps) < 2:
-        raise RuntimeError("the depth maps do not agree; is the object textured, and the board flat?")
+    return [m for m in maps if np.count_nonzero(m.depth) > 500]
 
-    t = time.perf_counter()
+
+def _fused_mesh(maps, frame, opt: ScanOptions, progress, cancel, stats: dict) -> trimesh.Trimesh:
+    """Fuse the depth maps in a voxel grid around the object on the board and take its surface (metres)."""
     points = np.concatenate([m.points()[0] for m in maps])
     region = fu.object_region(points, frame)
     if region is None:
@@ -179,16 +203,13 @@ def scan(source, camera, anchors, options: ScanOptions | None = None, progress: 
                                  hull_slack=max(2, len(maps) // 8), progress=progress)
     _check(cancel)
     mesh = fu.surface_from_field(field_, lo2, voxel, frame)
-    timings["fuse_s"] = time.perf_counter() - t
     stats.update(voxel_mm=voxel * 1000, faces=len(mesh.faces), watertight=bool(mesh.is_watertight))
-    return ScanResult(mesh, chosen, poses, len(views), timings, stats)
+    return mesh
 
 
 def print_frame(anchors) -> np.ndarray:
     """4x4 from the world frame (m) to the print frame (mm): up along +z, the paper at z = 0."""
-    from arapp.scan.fusion import board_frame
-
-    fr = board_frame(anchors)
+    fr = fu.board_frame(anchors)
     T = np.eye(4)
     T[:3, :3] = fr.R.T * 1000.0
     T[:3, 3] = -fr.R.T @ fr.origin * 1000.0

@@ -117,32 +117,41 @@ def make_trajectory(spec: dict, duration: float, seed: int = 0, where: str = "tr
             w = _smoothstep((t - t_leave) / ramp) * (1.0 - _smoothstep((t - (t_back - ramp)) / ramp))
             return look_at(eye0 + 0.4 * w * away, target0 + w * away)
     elif kind == "keyframes":
-        keys = g("keys")
-        if not isinstance(keys, list) or len(keys) < 2:
-            raise SessionError(f"{where}.keys: need at least two keyframes {{t, eye, target}}")
-        try:
-            ts = np.array([k["t"] for k in keys], float)
-            eyes = np.array([k["eye"] for k in keys], float)
-            targets = np.array([k.get("target", [0, 0, 0]) for k in keys], float)
-            rolls = np.radians([k.get("roll", 0.0) for k in keys])
-        except (KeyError, TypeError, ValueError) as e:
-            raise SessionError(f"{where}.keys: each key needs t, eye [x,y,z] and optional target, roll ({e})") from None
-        if np.any(np.diff(ts) <= 0):
-            raise SessionError(f"{where}.keys: times must increase")
-        se = CubicSpline(ts, eyes, bc_type="clamped")
-        st = CubicSpline(ts, targets, bc_type="clamped")
-        sr = CubicSpline(ts, rolls, bc_type="clamped")
-
-        def base(t):
-            tc = float(np.clip(t, ts[0], ts[-1]))
-            return look_at(se(tc), st(tc), float(sr(tc)))
+        base = _keyframes(g("keys"), where)
     else:
         raise SessionError(f"{where}.kind: must be static, orbit, approach, pan, leave_view or keyframes, "
                           f"got {kind!r}")
 
     shake = spec.get("shake")
-    if not shake:
-        return base
+    return _with_shake(base, shake, seed) if shake else base
+
+
+def _keyframes(keys, where: str) -> PoseFn:
+    """Clamped cubic splines through the keys' eye, target and roll (held at the first and last key)."""
+    if not isinstance(keys, list) or len(keys) < 2:
+        raise SessionError(f"{where}.keys: need at least two keyframes {{t, eye, target}}")
+    try:
+        ts = np.array([k["t"] for k in keys], float)
+        eyes = np.array([k["eye"] for k in keys], float)
+        targets = np.array([k.get("target", [0, 0, 0]) for k in keys], float)
+        rolls = np.radians([k.get("roll", 0.0) for k in keys])
+    except (KeyError, TypeError, ValueError) as e:
+        raise SessionError(f"{where}.keys: each key needs t, eye [x,y,z] and optional target, roll ({e})") from None
+    if np.any(np.diff(ts) <= 0):
+        raise SessionError(f"{where}.keys: times must increase")
+    se = CubicSpline(ts, eyes, bc_type="clamped")
+    st = CubicSpline(ts, targets, bc_type="clamped")
+    sr = CubicSpline(ts, rolls, bc_type="clamped")
+
+    def base(t):
+        tc = float(np.clip(t, ts[0], ts[-1]))
+        return look_at(se(tc), st(tc), float(sr(tc)))
+
+    return base
+
+
+def _with_shake(base: PoseFn, shake: dict, seed: int) -> PoseFn:
+    """`base` followed by hand-held tremor: {"pos_mm", "rot_deg", "freq_hz"}, repeatable for a seed."""
     rng = np.random.default_rng(seed + 7919)
     pos_amp = float(shake.get("pos_mm", 2.0)) / 1000.0
     rot_amp = np.radians(float(shake.get("rot_deg", 0.5)))
