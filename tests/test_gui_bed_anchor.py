@@ -108,7 +108,10 @@ def test_touched_corners_give_the_same_anchor_as_the_cli(qtbot, setup, config_di
     from arapp.printing.presets import write_preset
 
     write_preset("ender3", cli_path)
-    args = argparse.Namespace(printer=str(cli_path), create=False, dictionary="DICT_4X4_50", id=42, length=0.04,
+    from tracking.anchors.defaults import DEFAULT_DICTIONARY
+
+    assert d.dictionary.currentText() == DEFAULT_DICTIONARY  # the CLI's default marker
+    args = argparse.Namespace(printer=str(cli_path), create=False, dictionary=DEFAULT_DICTIONARY, id=42, length=0.04,
                               center=None, touched=[100.0, 50.0, 140.0, 50.0], rotation=0.0)
     assert cli.run(args) == 0
     assert json.loads(cli_path.read_text())["bed_anchor"] == json.loads(d.saved_path.read_text())["bed_anchor"]

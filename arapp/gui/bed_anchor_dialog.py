@@ -32,9 +32,10 @@ from arapp import user_config
 from arapp.printing.bed_anchor import bed_from_anchor_measured, bed_from_anchor_touched, save_bed_anchor
 from arapp.printing.presets import write_preset
 from arapp.printing.profile import ProfileError, load_profile
+from tracking.anchors.defaults import DEFAULT_DICTIONARY
 from tracking.session import aruco_dictionary_names
 
-DEFAULT = {"dictionary": "DICT_4X4_50", "id": 42, "length_mm": 40.0}  # as the CLI's defaults
+DEFAULT = {"dictionary": DEFAULT_DICTIONARY, "id": 42, "length_mm": 40.0}  # as the CLI's defaults
 
 
 def profile_file_for(profile_choice: str) -> Path:
