@@ -156,7 +156,7 @@ def _plot(path: Path, gt_t, gt_p, est_t, est_p) -> None:
     """Top view and height-over-time of the camera trajectory, estimate against ground truth."""
     # here, not at the top: matplotlib is slow to import and only the plot needs it; the backend must be
     # chosen before pyplot is imported
-    import matplotlib
+    import matplotlib  # heavy and only for this plot: loaded when a plot is asked for
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -9,10 +9,12 @@ did not scale the page.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import cv2
 import numpy as np
+from PIL import Image
 
 from tracking.anchors.model import build_models
 from tracking.anchors.render import draw_anchor, plane_layout
@@ -90,10 +92,6 @@ def sheet(spec: AnchorSpec, dpi: float = 300.0, page: str = "A4") -> tuple[np.nd
 
 def write_sheet(spec: AnchorSpec, out_dir: str | Path, name: str, dpi: float = 300.0, page: str = "A4") -> list[Path]:
     """Write NAME.png and NAME.pdf (true scale at `dpi`) and NAME.anchors.json; returns the paths."""
-    import json
-
-    from PIL import Image
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     img, block = sheet(spec, dpi, page)

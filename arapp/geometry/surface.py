@@ -243,7 +243,7 @@ class NurbsSurface:
     # ----------------------------------------------------------- display/mesh
     def tessellate(self, count=None, step=None, tolerance=None):
         """Triangle mesh of the surface (trimesh.Trimesh, model units); see tessellate.py."""
-        from .tessellate import tessellate_surface
+        from .tessellate import tessellate_surface  # tessellate imports this module (a cycle)
 
         return tessellate_surface(self, count=count, step=step, tolerance=tolerance)
 

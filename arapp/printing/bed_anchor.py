@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from arapp.printing.profile import GENERIC_PATH, parse_profile
+
 
 def bed_from_anchor_measured(center_xy_mm, rotation_deg: float = 0.0, z_mm: float = 0.0) -> np.ndarray:
     """4x4 `bed_from_anchor` of a marker lying flat with its centre at `center_xy_mm`, turned by rotation_deg."""
@@ -54,8 +56,6 @@ def bed_from_anchor_touched(bottom_left_mm, bottom_right_mm, side_m: float, tole
 
 def save_bed_anchor(profile_path: str | Path, anchor: dict, bed_from_anchor: np.ndarray) -> Path:
     """Write the bed anchor into a printer profile JSON (created from the generic one when missing)."""
-    from arapp.printing.profile import GENERIC_PATH, parse_profile
-
     path = Path(profile_path)
     data = json.loads(path.read_text()) if path.exists() else json.loads(Path(GENERIC_PATH).read_text())
     block = dict(anchor)

@@ -8,6 +8,7 @@ drops it onto the bed (lowest point at z = 0) and centres it on the bed.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,9 @@ from arapp.exchange.meshes import (  # noqa: F401
     write_atomic,
     write_mesh,
 )
+from arapp.placement import placement_from_any, placement_from_model
+
+from .profile import load_profile
 
 
 class ModelDoesNotFitError(ValueError):
@@ -90,9 +94,6 @@ def _model_matrix(model, placement) -> np.ndarray:
         return M
     if placement is None:
         return np.asarray(model.placement_matrix("mm"), dtype=float)
-    import dataclasses
-
-    from arapp.placement import placement_from_any
 
     shown = dataclasses.replace(model, placement=placement_from_any(placement, model.placement))
     return np.asarray(shown.placement_matrix("mm"), dtype=float)
@@ -127,8 +128,6 @@ def placed_solid(mesh_or_model, placement=None, *, thickness_mm: float = 2.0, pr
         if placement is not None:
             M = _as_matrix(placement)
             if M is None:
-                from arapp.placement import placement_from_model
-
                 M = placement_from_model(mesh.bounds, placement)
             mesh.apply_transform(M)
     else:
@@ -148,8 +147,6 @@ def placed_solid(mesh_or_model, placement=None, *, thickness_mm: float = 2.0, pr
 
 def drop_on_bed(mesh: trimesh.Trimesh, profile=None, center: bool = True) -> trimesh.Trimesh:
     """The mesh moved so its lowest point is at z = 0 and (with `center`) its bounding box centred on the bed."""
-    from .profile import load_profile
-
     profile = profile or load_profile()
     lo, hi = mesh.bounds
     shift = np.array([0.0, 0.0, -lo[2]])

@@ -16,6 +16,8 @@ import numpy as np
 
 from arapp.exchange.files import DocumentFormat, register_document
 from arapp.exchange.jsonfile import read_json
+from tracking.errors import SessionError
+from tracking.session import parse_anchor, parse_rigid
 
 FORMAT = "arapp-printer/1"
 PROFILES_DIR = Path(__file__).with_name("profiles")
@@ -199,9 +201,6 @@ def parse_profile(data: dict, source: str = "<profile>", defaults: dict | None =
 
 def _parse_bed_anchor(block: dict, source: str):
     """The bed anchor as an AnchorSpec plus its 4x4 `bed_from_anchor` (mm)."""
-    from tracking.errors import SessionError
-    from tracking.session import parse_anchor, parse_rigid
-
     block = dict(block)
     bed_from_anchor = np.eye(4)
     if "bed_from_anchor" in block:

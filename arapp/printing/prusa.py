@@ -15,6 +15,11 @@ import tempfile
 import time
 from pathlib import Path
 
+from .export import write_stl
+from .gcode import read_stats
+from .profile import load_profile
+from .slicer import SliceCancelled, SliceResult, SliceSettings, prepare
+
 EXECUTABLES = ("prusa-slicer", "PrusaSlicer", "prusa-slicer-console")
 
 
@@ -149,8 +154,6 @@ def run_prusa(stl_path: Path, gcode_path: Path, settings, profile, timeout: floa
 
     `cancel` (threading.Event): once set, PrusaSlicer is stopped and SliceCancelled raised.
     """
-    from .slicer import SliceCancelled
-
     exe = require_prusa()
     cfg = gcode_path.with_suffix(".ini")
     cfg.write_text("".join(f"{k} = {v}\n" for k, v in prusa_config(settings, profile).items()))
@@ -187,11 +190,6 @@ def slice_with_prusa(mesh_mm, settings=None, profile=None, progress=None, cancel
 
     Returns a SliceResult (toolpaths empty; parse the G-code with parse_gcode for moves).
     """
-    from .export import write_stl
-    from .gcode import read_stats
-    from .profile import load_profile
-    from .slicer import SliceCancelled, SliceResult, SliceSettings, prepare
-
     settings = settings or SliceSettings()
     profile = profile or load_profile()
     settings.check_for(profile)  # the same ranges as the built-in slicer

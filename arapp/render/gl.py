@@ -140,7 +140,7 @@ def create_context(width: int, height: int):
     name = select_platform()
     try:
         if name == "egl":
-            from pyrender.platforms import egl
+            from pyrender.platforms import egl  # the platform tried decides which GL module may load
 
             device = egl.get_default_device()
             plat = egl.EGLPlatform(width, height, device=device)

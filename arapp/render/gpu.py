@@ -11,6 +11,8 @@ import weakref
 
 import numpy as np
 
+from arapp.render.shadow import footprint
+
 
 class Buffer:
     """A VAO with one VBO (and optionally an index buffer): the GPU copy of a mesh or a line set."""
@@ -106,8 +108,6 @@ class GpuMesh:
 
     def shadow_quad(self):
         if self.shadow is None:
-            from arapp.render.shadow import footprint
-
             GL = self.GL
             verts, faces, _ = self._mesh_data
             tex, corners = footprint(verts, faces)

@@ -86,7 +86,7 @@ class OverlayRenderer:
         from OpenGL import GL  # bound to the platform chosen by create_context
 
         self.GL = GL
-        from arapp.render import programs
+        from arapp.render import programs  # imports OpenGL.GL: only after create_context chose the platform
 
         self._surface_prog = programs.build_program(programs.SURFACE_VS, programs.SURFACE_FS)
         self._line_prog = programs.build_program(programs.LINE_VS, programs.FLAT_FS, programs.LINE_GS)

@@ -26,6 +26,8 @@ import numpy as np
 import trimesh
 from scipy import ndimage
 
+from tracking.anchors.model import build_models
+
 
 @dataclass
 class BoardFrame:
@@ -57,8 +59,6 @@ class BoardFrame:
 def board_frame(anchors) -> BoardFrame:
     """The first anchor's plane. Boards (GridBoard, ChArUco) have z into the paper (up = -z); single
     markers and QR codes z out of it (docs/recording-format.md)."""
-    from tracking.anchors.model import build_models
-
     model = build_models(list(anchors))[0]
     T = model.world_from_anchor
     sign = model.anchor_kind.face
@@ -167,7 +167,7 @@ def fuse(maps, frame: BoardFrame, lo, hi, voxel: float, trunc: float, masks=None
 def surface_from_field(field: np.ndarray, lo_local: np.ndarray, voxel: float, frame: BoardFrame,
                        smooth_iterations: int = 6) -> trimesh.Trimesh:
     """Watertight mesh (world frame, metres, outward normals) of the zero level set, largest component."""
-    from skimage.measure import marching_cubes
+    from skimage.measure import marching_cubes  # optional extra arapp[scan]; the CLI checks it first
 
     padded = np.pad(field, 1, constant_values=1.0)
     if padded.min() >= 0:

@@ -22,6 +22,9 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from arapp.geometry import basis
+from arapp.scan.fusion import board_frame
+
 
 @dataclass
 class NurbsFit:
@@ -43,9 +46,6 @@ def _circle_centre(xy: np.ndarray) -> np.ndarray:
 
 def fit_revolution(mesh: trimesh.Trimesh, anchors, n_ctrl: int = 8, max_rms_mm: float | None = None) -> NurbsFit:
     """Fit a surface of revolution about the board normal to `mesh` (world frame, metres); see module doc."""
-    from arapp.geometry import basis
-    from arapp.scan.fusion import board_frame
-
     fr = board_frame(anchors)
     L = fr.to_local(np.asarray(mesh.vertices)) * 1000.0      # mm, z up from the paper
     N = np.asarray(mesh.vertex_normals) @ fr.R
@@ -105,9 +105,6 @@ def fit_patch(mesh: trimesh.Trimesh, anchors, n_u: int = 12, n_v: int = 8) -> Nu
     """A least-squares bicubic B-spline patch wrapped around the scan: u around the vertical axis through
     the scan's centroid (angle, the seam at u = 0/1 shares its control column), v up the height. Vertices
     are parameterised by (angle / 2 pi, height / H); the caps are left open (export thickens the wall)."""
-    from arapp.geometry import basis
-    from arapp.scan.fusion import board_frame
-
     fr = board_frame(anchors)
     L = fr.to_local(np.asarray(mesh.vertices)) * 1000.0
     H = float(L[:, 2].max())

@@ -20,6 +20,10 @@ from scipy.optimize import least_squares
 from scipy.sparse import lil_matrix
 from scipy.spatial.transform import Rotation
 
+from tracking.anchors.detect import ArucoDetection
+from tracking.anchors.model import build_models
+from tracking.camera import Camera
+
 MARKER_WEIGHT = 2.0   # marker corners are measured to ~0.5 px: twice the weight of a 1 px SIFT keypoint
 
 
@@ -40,10 +44,6 @@ class Refinement:
 
 def _marker_observations(views, K, anchors):
     """Per view: (world corners (M,3), pixels (M,2)) of the anchors' markers found in the undistorted image."""
-    from tracking.anchors.detect import ArucoDetection
-    from tracking.anchors.model import build_models
-    from tracking.camera import Camera
-
     h, w = views[0].image.shape[:2]
     models = build_models(list(anchors))
     det = ArucoDetection(models, Camera(K, np.zeros(5), w, h))

@@ -30,7 +30,11 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from PIL import Image
 import trimesh
+
+from tracking.camera import Camera
+from tracking.recorder import RecordingWriter
 
 # vase geometry (metres)
 VASE_HEIGHT = 0.060
@@ -145,7 +149,6 @@ def _quad(x0, y0, x1, y1, z, image) -> trimesh.Trimesh:
     v = np.array([[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]], float)
     uv = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], float)  # texture v runs up the image
     mesh = trimesh.Trimesh(v, np.array([[0, 2, 1], [0, 3, 2]]), process=False)  # faces toward -z (up)
-    from PIL import Image
 
     mesh.visual = trimesh.visual.TextureVisuals(uv=uv, image=Image.fromarray(image))
     return mesh
@@ -187,13 +190,12 @@ def render_scan(poses: list[np.ndarray], K: np.ndarray, width: int, height: int,
                 noise_std: float = 1.0, with_depth: bool = False):
     """Render the scene from each pose: list of BGR uint8 images (and metric depth maps, 0 = nothing)."""
     os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
-    import pyrender
+    import pyrender  # GL: loaded only where the synthetic images are rendered
 
     rng = np.random.default_rng(seed)
     truth = vase_truth()
     scene = pyrender.Scene(bg_color=[0.1, 0.1, 0.1, 1.0], ambient_light=[1.0, 1.0, 1.0])
     vase = truth.mesh.copy()
-    from PIL import Image
 
     vase.visual = trimesh.visual.TextureVisuals(uv=truth.mesh.visual.uv,
                                                 image=Image.fromarray(_noise_texture(rng, 1024, True)))
@@ -228,9 +230,6 @@ def write_vase_recording(folder: str | Path, n_frames: int = 48, width: int = 64
                          with_depth: bool = False) -> VaseTruth:
     """Render the orbit and write it as an arapp-recording/1 folder with groundtruth.tum (and, with
     `with_depth`, the renderer's exact depth as the depth stream, rounded to 1 mm); returns the truth."""
-    from tracking.camera import Camera
-    from tracking.recorder import RecordingWriter
-
     truth = vase_truth()
     K = default_K(width, height)
     poses = orbit_poses(truth, n_frames, distance)

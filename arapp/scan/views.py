@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from tracking.sources import SourceWarning
+from tracking.tracker import Tracker
 
 
 class ScanCancelled(Exception):
@@ -55,8 +56,6 @@ def track_views(source, camera, anchors, progress: Callable[[str, int, int], Non
     the board is in view) over `source`; keep the frames it placed from the markers, undistorted (their
     depth too, when frames carry it). A recording that ends with an error (a damaged video or depth
     file) stops the scan with that error rather than scanning part of it."""
-    from tracking.tracker import Tracker
-
     tracker = Tracker(camera, anchors, slam=False, filter=False)
     maps = None
     if np.any(camera.dist != 0):

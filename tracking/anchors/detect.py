@@ -134,7 +134,7 @@ class ArucoDetection:
         Returns None (detect instead) when fewer than `min_fraction` of the markers are re-found, or when
         a ChArUco board is among them (its chessboard corners need the detector).
         """
-        from tracking.anchors.pose import project
+        from tracking.anchors.pose import project  # pose imports this module (a cycle)
         keys = sorted(keys)
         if not keys:
             return None

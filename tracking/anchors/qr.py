@@ -17,12 +17,15 @@ docs/recording-format.md's: x = -L/2 + u L/N, y = L/2 - v L/N.
 
 from __future__ import annotations
 
+import time
+
 import cv2
 import numpy as np
 
 from tracking.anchors.detect import Observation
 from tracking.anchors.edges import refine_squares
 from tracking.anchors.model import AnchorModel, square_corners
+from tracking.anchors.pose import project
 from tracking.camera import Camera
 
 _SUBPIX = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
@@ -192,7 +195,6 @@ class QRTracking:
         """Pixel box (x0, y0, x1, y1) around where the prediction puts the codes (with margin), or None."""
         if camera_from_world is None:
             return None
-        from tracking.anchors.pose import project
         pts = []
         for m in models:
             c = square_corners(m.spec.length * 1.6)  # symbol plus quiet zone plus prediction slack
@@ -221,7 +223,6 @@ class QRTracking:
         Both OpenCV detectors search, the ArUco-based one first (fastest); the classic one only while a
         `wanted` anchor (default: all) is still missing, since it finds codes the other misses (blur,
         perspective) and the other way round."""
-        import time
         t0 = time.perf_counter()
         x0 = y0 = 0
         img = gray

@@ -15,6 +15,7 @@ a real OAK device.
 
 from __future__ import annotations
 
+from datetime import timedelta
 from typing import Iterator
 
 import cv2
@@ -66,7 +67,6 @@ class DepthAISource(Source):
                  read_timeout_s: float = 5.0, depth: bool | None = None):
         super().__init__()
         dai = _import_depthai()
-        from datetime import timedelta
 
         self._timeout = timedelta(seconds=read_timeout_s)
         available = dai.Device.getAllAvailableDevices()
@@ -126,8 +126,6 @@ class DepthAISource(Source):
     def _depth_pipeline(self, dai, colour_out, fps: float):
         """StereoDepth from the CAM_B/CAM_C pair, aligned to `colour_out`, paired with it by a Sync node;
         returns the queue of message groups {"rgb", "depth"}."""
-        from datetime import timedelta
-
         p = self._pipeline
         left = p.create(dai.node.Camera).build(dai.CameraBoardSocket.CAM_B)
         right = p.create(dai.node.Camera).build(dai.CameraBoardSocket.CAM_C)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from tracking.anchors.model import charuco_board
 from tracking.errors import SessionError
 from tracking.session import AnchorSpec
 
@@ -124,8 +125,6 @@ def pattern_for(anchor: AnchorSpec) -> PrintedPattern:
         # GridBoard frame: origin at the first marker's outer corner, x right, y down, z into the paper.
         return PrintedPattern(tiles, L + s, L, (0.0, 0.0), 1.0, 1.0, margin=max(s, 0.3 * L), normal_sign=-1.0)
     if anchor.kind == "charuco":
-        from tracking.anchors.model import charuco_board
-
         board = charuco_board(anchor)
         sq, cols, rows = anchor.square_length, anchor.squares_x, anchor.squares_y
         bits = board.getDictionary().markerSize + 2
@@ -153,7 +152,5 @@ def anchor_corners(anchor: AnchorSpec) -> np.ndarray:
                                     anchor.separation, d, np.array(anchor.marker_ids()))
         return np.asarray(board.getObjPoints(), float).reshape(-1, 4, 3)
     if anchor.kind == "charuco":
-        from tracking.anchors.model import charuco_board
-
         return np.asarray(charuco_board(anchor).getObjPoints(), float).reshape(-1, 4, 3)
     raise SessionError(f"anchor_corners: {anchor.kind!r} anchors are not supported")

@@ -38,6 +38,8 @@ from tracking.errors import CalibrationError, SessionError
 from tracking.poses import invert
 from tracking.session import AnchorSpec, parse_anchors
 from tracking.synth.patterns import pattern_for
+from tracking.synth.texture import STYLES
+from tracking.synth.trajectory import make_trajectory
 
 DEFAULT_EFFECTS = {
     "noise": 0.0,  # sensor noise standard deviation at mid-grey, 8-bit levels (simple model; see "sensor")
@@ -169,7 +171,6 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
     size = desk.get("size", [1.4, 1.0])
     if not (isinstance(size, list) and len(size) == 2 and all(isinstance(s, (int, float)) and s > 0 for s in size)):
         raise SessionError(f"{where}.desk.size: must be [width, height] in metres, got {size!r}")
-    from tracking.synth.texture import STYLES
 
     style = desk.get("style", "desk")
     if style not in STYLES:
@@ -199,7 +200,6 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
         effects=effects, fourcc=str(video.get("fourcc", "MJPG")), quality=int(video.get("quality", 90)),
         supersample=ss,
     )
-    from tracking.synth.trajectory import make_trajectory
 
     make_trajectory(scene.trajectory, scene.duration, scene.seed, f"{where}.trajectory")  # validate now
     return scene

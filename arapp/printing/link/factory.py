@@ -35,7 +35,7 @@ class OctoPrintTarget:
 
 
 def _serial(target: SerialTarget, profile, job_path) -> PrintLink:
-    from .serial_link import SerialPrinter
+    from .serial_link import SerialPrinter  # each backend's dependencies load only when it is chosen
 
     if not target.port:
         raise ValueError("no serial port: give --port DEV (e.g. /dev/ttyUSB0) or set link.port in the printer profile")
@@ -45,7 +45,7 @@ def _serial(target: SerialTarget, profile, job_path) -> PrintLink:
 
 
 def _octoprint(target: OctoPrintTarget, profile, job_path) -> PrintLink:
-    from .octoprint import OctoPrintLink, load_api_key
+    from .octoprint import OctoPrintLink, load_api_key  # requests: only for OctoPrint
 
     if not target.url:
         raise ValueError("give the OctoPrint URL (e.g. http://octopi.local) and the API key file")

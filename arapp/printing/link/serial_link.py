@@ -20,6 +20,8 @@ import threading
 import time
 from collections.abc import Sequence
 
+import serial
+
 from . import protocol as P
 from .base import (
     PRINTING,
@@ -126,8 +128,6 @@ class SerialPrinter(PrintLink):
     # ------------------------------------------------------------------ port
     def connect(self) -> None:
         """Open the port, wait for the firmware, reset line numbers (M110), ask M115."""
-        import serial
-
         try:
             self._serial = serial.serial_for_url(
                 self.port, baudrate=self.baud, timeout=None, write_timeout=10.0
@@ -202,8 +202,6 @@ class SerialPrinter(PrintLink):
 
     def _read_loop(self) -> None:
         """Reader thread: bytes -> lines -> classified replies on the event queue."""
-        import serial
-
         ser = self._serial
         buf = b""
         try:
@@ -227,8 +225,6 @@ class SerialPrinter(PrintLink):
                 self._events.put(exc)
 
     def _write(self, data: bytes) -> None:
-        import serial
-
         log.debug(">>> %s", data.decode("ascii", errors="replace").rstrip())
         try:
             with self._write_lock:
@@ -515,7 +511,6 @@ class SerialPrinter(PrintLink):
         elif ev.kind == P.ECHO:
             self.messages.append(text)
             del self.messages[:-50]
-
 
 
 class _Reporter:

@@ -12,8 +12,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..export import clean_mesh, fit_on_bed
+from ..profile import load_profile
+from .contours import layer_planes, loops_to_region, slice_loops
+from .perimeters import fill_area, solid_areas, split_fill
+from .planner import LayerToolpaths, ToolPath, plan_layer, skirt_loops
 from .settings import INFILL_PATTERNS, SliceSettings
-from .planner import LayerToolpaths, ToolPath
 
 __all__ = ["SliceSettings", "SliceResult", "SliceCancelled", "slice_mesh", "INFILL_PATTERNS",
            "LayerToolpaths", "ToolPath"]
@@ -49,8 +53,6 @@ def skirt_margin(settings: SliceSettings, width: float) -> float:
 
 def prepare(mesh_mm, settings: SliceSettings, profile):
     """The mesh cleaned and placed on the bed, and the scale applied to fit it (see export.fit_on_bed)."""
-    from ..export import clean_mesh, fit_on_bed
-
     mesh = clean_mesh(mesh_mm)
     width = settings.width(profile.nozzle_diameter)
     return fit_on_bed(mesh, profile, margin=skirt_margin(settings, width),
@@ -65,11 +67,7 @@ def slice_mesh(mesh_mm, settings: SliceSettings | None = None, profile=None, pro
     stops the work with SliceCancelled once set. A model that does not fit
     the bed raises ModelDoesNotFitError unless settings.scale_to_fit.
     """
-    from ..gcode import write_gcode
-    from ..profile import load_profile
-    from .contours import layer_planes, loops_to_region, slice_loops
-    from .perimeters import fill_area, solid_areas, split_fill
-    from .planner import plan_layer, skirt_loops
+    from ..gcode import write_gcode  # here, not at the top: gcode imports .slicer.planner (an import cycle)
 
     settings = settings or SliceSettings()
     profile = profile or load_profile()
