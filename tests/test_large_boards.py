@@ -83,36 +83,33 @@ def check(pose, ref, gt):
     assert d_gt < 0.0006 and r_gt < 0.04, (d_gt, r_gt)
 
 
+def tracks_like_opencv(spec: dict, board, detector, cam, gt: np.ndarray, markers: int) -> None:
+    """The tracker sees all `markers` of `board` drawn at ground truth `gt` and its raw pose agrees with
+    both OpenCV's own pose from `detector` and the ground truth (see check)."""
+    gray = draw_view(board, cam, gt)
+    ref = opencv_pose(board, detector, cam, gray)
+    res = AnchorTracker(parse_anchors([spec]), cam, filter=False).process(gray, 0.0)
+    assert res.markers == markers
+    assert res.raw_world_from_camera is not None
+    check(res.raw_world_from_camera, ref, gt)
+
+
 @pytest.mark.parametrize("view", range(len(VIEWS)))
 def test_gridboard_6x6_tracks(cam, view):
     spec = {"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 6, "markers_y": 6,
             "marker_length": 0.03, "separation": 0.006, "first_id": 0}
-    an = parse_anchors([spec])
     d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50)
     board = cv2.aruco.GridBoard((6, 6), 0.03, 0.006, d)
-    gt = VIEWS[view]
-    gray = draw_view(board, cam, gt)
-    ref = opencv_pose(board, subpix_detector(d), cam, gray)
-    res = AnchorTracker(an, cam, filter=False).process(gray, 0.0)
-    assert res.markers == 36
-    assert res.raw_world_from_camera is not None
-    check(res.raw_world_from_camera, ref, gt)
+    tracks_like_opencv(spec, board, subpix_detector(d), cam, VIEWS[view], markers=36)
 
 
 @pytest.mark.parametrize("view", range(len(VIEWS)))
 def test_charuco_11x8_tracks(cam, view):
     spec = {"kind": "charuco", "dictionary": "DICT_5X5_100", "squares_x": 11, "squares_y": 8,
             "square_length": 0.02, "marker_length": 0.015, "first_id": 0}
-    an = parse_anchors([spec])
     d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_5X5_100)
     board = cv2.aruco.CharucoBoard((11, 8), 0.02, 0.015, d)
-    gt = VIEWS[view]
-    gray = draw_view(board, cam, gt)
-    ref = opencv_pose(board, cv2.aruco.CharucoDetector(board), cam, gray)
-    res = AnchorTracker(an, cam, filter=False).process(gray, 0.0)
-    assert res.markers == 44
-    assert res.raw_world_from_camera is not None
-    check(res.raw_world_from_camera, ref, gt)
+    tracks_like_opencv(spec, board, cv2.aruco.CharucoDetector(board), cam, VIEWS[view], markers=44)
 
 
 def test_many_squares_refine_in_one_call():
