@@ -215,3 +215,19 @@ def test_second_pass_drops_a_corner_off_by_one_and_a_half_pixels():
     want[bad] = False
     assert np.array_equal(sol.inliers, want) and sol.markers == 12
     assert np.linalg.norm(sol.world_from_camera[:3, 3] - GT[:3, 3]) < 1e-6
+
+
+def test_a_marker_with_most_corners_off_is_dropped_whole():
+    """Whole-marker rejection: marker 7 with 3 of 4 corners 6 px off loses its 4th corner too; marker 9
+    with 2 of 4 off (not fewer than half in) keeps its 2 good corners."""
+    obj, ids = _board_points()
+    img = _project(GT, obj)
+    m7, m9 = np.flatnonzero(ids == 7), np.flatnonzero(ids == 9)
+    img[m7[:3]] += [6.0, 0.0]
+    img[m9[:2]] += [0.0, -6.0]
+    sol = solve_pose([Observation(0, obj, img, ids, 12)], [np.eye(4)], CAM)
+    want = np.ones(len(obj), bool)
+    want[m7] = False
+    want[m9[:2]] = False
+    assert np.array_equal(sol.inliers, want) and sol.markers == 11
+    assert np.linalg.norm(sol.world_from_camera[:3, 3] - GT[:3, 3]) < 1e-6
