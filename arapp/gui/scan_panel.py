@@ -197,6 +197,7 @@ def install_scan(window) -> ScanSession:
     tracking = window.findChild(QDockWidget, "dock_tracking")
     if tracking is not None:
         window.tabifyDockWidget(tracking, dock)
+        tracking.raise_()  # the Tracking tab shows until the user picks Scan
     window.scan_dock = dock
     overlay = DomeOverlay(window.view, scan)
     window.scan_overlay = overlay
