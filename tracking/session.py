@@ -98,6 +98,19 @@ class Session:
         return path
 
 
+def read_anchor_blocks(path: str | Path) -> list:
+    """The anchor blocks of an anchors JSON file (`--anchors`): a list as in session.json, or an object
+    with an "anchors" list (a session.json itself). Unparsed; SessionError naming the file when unreadable."""
+    path = Path(path)
+    if not path.is_file():
+        raise SessionError(f"{path}: anchors file does not exist")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise SessionError(f"{path}: invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}") from None
+    return data.get("anchors") if isinstance(data, dict) else data
+
+
 def parse_session(data: dict, folder: Path, where: str = "session.json") -> Session:
     """Validate a session dict; errors are `SessionError`s naming the file and field."""
     if not isinstance(data, dict):

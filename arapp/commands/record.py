@@ -22,11 +22,10 @@ def add_arguments(parser):
 
 
 def run(args):
-    import json
     from pathlib import Path
 
-    from tracking.errors import SessionError
     from tracking.recorder import record
+    from tracking.session import read_anchor_blocks
     from tracking.sources import open_source
 
     from arapp.exchange.staging import staged_folder
@@ -37,16 +36,7 @@ def run(args):
     for flag, value in (("--width", args.width), ("--height", args.height)):
         if value is not None and not 0 < value <= 16384:
             raise ValueError(f"{flag} must be 1 to 16384 pixels, got {value}")
-    anchors = None
-    if args.anchors:
-        path = Path(args.anchors)
-        if not path.is_file():
-            raise SessionError(f"{path}: anchors file does not exist")
-        try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError as e:
-            raise SessionError(f"{path}: invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}") from None
-        anchors = data.get("anchors") if isinstance(data, dict) else data
+    anchors = read_anchor_blocks(args.anchors) if args.anchors else None
     out = Path(args.out)
     if out.exists() and any(out.iterdir()) and not args.force:
         raise FileExistsError(f"{out}: already holds files (a recording?); use --force to overwrite it")

@@ -57,20 +57,12 @@ def _progress():
 
 
 def _anchors_for_source(args):
-    from tracking.errors import SessionError
     from tracking.recorder import DEFAULT_ANCHORS
-    from tracking.session import parse_anchors
+    from tracking.session import parse_anchors, read_anchor_blocks
 
     if not args.anchors:
         return parse_anchors(DEFAULT_ANCHORS)
-    path = Path(args.anchors)
-    if not path.is_file():
-        raise SessionError(f"{path}: anchors file does not exist")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise SessionError(f"{path}: invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}") from None
-    return parse_anchors(data.get("anchors") if isinstance(data, dict) else data)
+    return parse_anchors(read_anchor_blocks(args.anchors), where=f"{args.anchors}: anchors")
 
 
 class _TimedSource:
