@@ -1,7 +1,7 @@
 """Scan benchmark: `arapp scan` on a synthetic scan with ground truth, against Open3D's TSDF fusion fed
 ground-truth depth and poses (the ceiling for the dense part).
 
-Scene: arapp.scan.synthetic (a textured vase of known profile, 60 mm tall, on a
+Scene: tests/scan_scene.py (a textured vase of known profile, 60 mm tall, on a
 6 x 6 GridBoard, 640 x 480, two orbits at 30 cm). Scores, against the true
 mesh, by KD-tree on dense surface samples: accuracy (median and 90th
 percentile distance from the scan to the truth), completeness (fraction of
@@ -23,6 +23,7 @@ similarity alignment to the true cameras (it has no metric scale of its own).
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -32,6 +33,9 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 import numpy as np  # noqa: E402
 import trimesh  # noqa: E402
 from scipy.spatial import cKDTree  # noqa: E402
+
+# the synthetic scenes are test scaffolding kept in tests/ (tests/scenes.py, tests/scan_scene.py)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 
 def _scores(mesh: trimesh.Trimesh, truth, n: int = 40000) -> dict:
@@ -59,7 +63,7 @@ def _scores(mesh: trimesh.Trimesh, truth, n: int = 40000) -> dict:
 def _open3d_ceiling(views, truth, K, width, height):
     import open3d as o3d
 
-    from arapp.scan.synthetic import render_scan
+    from scan_scene import render_scan
 
     poses = [v.pose for v in views]
     t0 = time.perf_counter()
@@ -144,7 +148,7 @@ def _colmap(views, truth):
 
 def run(quick: bool = False) -> str:
     from arapp.scan.pipeline import ScanOptions, scan
-    from arapp.scan.synthetic import write_vase_recording
+    from scan_scene import write_vase_recording
     from tracking.sources import RecordingSource
 
     n_frames = 36 if quick else 48

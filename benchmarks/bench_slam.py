@@ -11,6 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
+# the synthetic scenes are test scaffolding kept in tests/ (tests/scenes.py, tests/scan_scene.py)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
 ROOT = Path(__file__).resolve().parents[1]
 HERE = Path(__file__).resolve().parent
 for _p in (str(ROOT), str(HERE)):
@@ -55,7 +58,7 @@ def measure(name: str, qr_call: str = "QRCodeDetector.detectAndDecodeMulti") -> 
     """Metrics of the tracker (filtered output and, in a second run, with its filter off), the plain way and
     the filtered plain way on one recording."""
     from tracking.evaluation import evaluate
-    from tracking.slam.scenes import load_recording, run_tracker
+    from scenes import load_recording, run_tracker
     from tracking.tracker import Tracker
 
     frames, session = load_recording(ROOT / "recordings" / name)
@@ -85,7 +88,7 @@ def measure(name: str, qr_call: str = "QRCodeDetector.detectAndDecodeMulti") -> 
 
 def measure_paced(name: str, pace: str) -> dict:
     """The tracker on one recording with frames handed in at another pace (see run_tracker)."""
-    from tracking.slam.scenes import load_recording, run_tracker
+    from scenes import load_recording, run_tracker
     from tracking.tracker import Tracker
 
     frames, session = load_recording(ROOT / "recordings" / name)

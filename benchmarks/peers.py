@@ -14,12 +14,17 @@ Poses are world_from_camera 4x4, metres.
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
 import cv2
 import numpy as np
 
 from tracking.anchors.dictionaries import aruco_dictionary
+
+# the synthetic scenes are test scaffolding kept in tests/ (tests/scenes.py, tests/scan_scene.py)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 
 def _qr_calls() -> dict:
@@ -79,7 +84,7 @@ def chosen_qr_call(folder, limit: int | None = None) -> tuple[str, dict]:
     process: the anchors and SLAM sections of one benchmark run use the same call."""
     key = (str(folder), limit)
     if key not in _CHOSEN:
-        from tracking.slam.scenes import load_recording
+        from scenes import load_recording
 
         frames, session = load_recording(folder, slice(0, limit) if limit else None)
         measured = measure_qr_calls(frames, session.anchors[0].text)

@@ -13,7 +13,7 @@ from tracking.anchors import AnchorTracker
 from tracking.anchors.model import build_models
 from tracking.anchors.occlusion import covered_fraction, is_covered
 from tracking.session import parse_anchors
-from tracking.slam.scenes import render_sequence, scene_dict
+from scenes import render_sequence, scene_dict
 from tracking.tracker import Tracker
 
 SKIN_BGR = np.array([120.0, 150.0, 205.0])

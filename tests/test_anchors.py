@@ -262,7 +262,7 @@ def test_smeared_markers_count_less_in_the_filter():
     from pathlib import Path
 
     from tracking.evaluation import evaluate
-    from tracking.slam.scenes import load_recording
+    from scenes import load_recording
 
     frames, session = load_recording(Path(__file__).resolve().parents[1] / "recordings" / "fast_motion")
     gt_t = np.array([f[0] for f in frames])

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 from tracking.poses import from_rvec_tvec, invert, make_pose
-from tracking.slam.scenes import load_recording
+from scenes import load_recording
 
 from conftest import ROOT
 

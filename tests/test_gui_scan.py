@@ -1,5 +1,5 @@
 """Scan mode in the window, offscreen (pytest-qt): a synthetic scan recording (a textured vase on a GridBoard,
-arapp.scan.synthetic) is played with scanning on; the coverage rises, Reconstruct runs in the background with
+tests/scan_scene.py) is played with scanning on; the coverage rises, Reconstruct runs in the background with
 progress, and the mesh becomes the window's model, placed where the true vase stands (oracle: the vase's true
 mesh, world frame, metres).
 """
@@ -22,7 +22,7 @@ N_FRAMES = 40
 
 @pytest.fixture(scope="module")
 def vase_recording(tmp_path_factory):
-    from arapp.scan.synthetic import vase_truth
+    from scan_scene import vase_truth
     from test_scan_session import shared_vase_recording
 
     return shared_vase_recording(tmp_path_factory), vase_truth()

@@ -1,6 +1,6 @@
 """arapp scan on a synthetic scan with ground truth: a textured vase of known profile standing on a GridBoard.
 
-The recording is rendered at test time (arapp.scan.synthetic, pyrender) and
+The recording is rendered at test time (tests/scan_scene.py, pyrender) and
 scanned once through the CLI. Oracles: the vase's analytic profile and its
 true mesh (distances by a KD-tree on dense surface samples), the world->print
 rule of docs/scanning.md written out here (GridBoard: up is -z; print frame
@@ -28,7 +28,7 @@ pytestmark = pytest.mark.slow
 @pytest.fixture(scope="module")
 def vase_scan(tmp_path_factory):
     """The synthetic recording, and `arapp scan ... --print --nurbs` run on it once."""
-    from arapp.scan.synthetic import write_vase_recording
+    from scan_scene import write_vase_recording
 
     root = tmp_path_factory.mktemp("scan")
     rec = root / "scan_vase"
@@ -164,7 +164,7 @@ def test_nurbs_fit_falls_back_to_a_bicubic_patch_for_a_box(tmp_path):
     any surface of revolution, and it loads as a model."""
     from arapp.geometry import load_model
     from arapp.scan.nurbs_fit import fit_model, fit_revolution, write_model
-    from arapp.scan.synthetic import BOARD
+    from scan_scene import BOARD
     from tracking.session import parse_anchors
 
     anchors = parse_anchors([dict(BOARD)])

@@ -1,7 +1,7 @@
 """arapp scan with a depth stream (issue 17 item 2): the frames' own depth is fused with the tracked poses,
 no dense matching.
 
-The recording is the synthetic scan scene (arapp.scan.synthetic, pyrender)
+The recording is the synthetic scan scene (tests/scan_scene.py, pyrender)
 written with the renderer's exact depth as its depth stream (16-bit PNG, mm).
 Oracles: the vase's true mesh and analytic profile (as in test_scan.py), the
 world->print rule of docs/scanning.md written out here, trimesh's
@@ -27,7 +27,7 @@ pytestmark = pytest.mark.slow
 def depth_scan(tmp_path_factory):
     """The synthetic recording with depth, and `arapp scan ... --print` run on it once with SGBM disabled."""
     import arapp.scan.depth as depth
-    from arapp.scan.synthetic import write_vase_recording
+    from scan_scene import write_vase_recording
 
     root = tmp_path_factory.mktemp("scan_depth")
     rec = root / "scan_vase_depth"

@@ -19,7 +19,7 @@ from arapp.app.runner import ImmediateRunner
 from arapp.app.scan_session import ScanSession, ScanSettings, registered_placement
 from arapp.app.session import Session
 from arapp.placement import placement_from_model, world_from_placement
-from arapp.scan.synthetic import BOARD, default_K
+from scan_scene import BOARD, default_K
 from tracking.camera import Camera
 from tracking.session import parse_anchors
 
@@ -137,7 +137,7 @@ def test_registered_placement_leaves_the_mesh_where_it_is():
 def shared_vase_recording(tmp_path_factory):
     """The synthetic scan recording both scan-mode test modules use, rendered once per test session: a
     40-frame orbit, seed 5 (not the benchmark's scene: seed 7, 48 frames)."""
-    from arapp.scan.synthetic import write_vase_recording
+    from scan_scene import write_vase_recording
 
     folder = tmp_path_factory.getbasetemp() / "scan_vase_40_seed5"
     if not (folder / "session.json").exists():
@@ -148,7 +148,7 @@ def shared_vase_recording(tmp_path_factory):
 @pytest.fixture(scope="module")
 def vase_frames(tmp_path_factory):
     pytest.importorskip("skimage", reason="arapp[scan] extra not installed")
-    from arapp.scan.synthetic import orbit_poses, vase_truth
+    from scan_scene import orbit_poses, vase_truth
     from tracking.sources import open_source
 
     truth = vase_truth()
@@ -164,7 +164,7 @@ def test_the_scanned_mesh_becomes_the_model_exactly_where_it_was_measured(app, t
     and placed on the anchor, it lies on the true mesh to within float rounding."""
     import arapp.scan.pipeline as pipeline_module
     from arapp.scan.pipeline import ScanResult
-    from arapp.scan.synthetic import vase_truth
+    from scan_scene import vase_truth
 
     session, scan = app
     truth = vase_truth()

@@ -9,7 +9,7 @@ import pytest
 
 from tracking.anchors import plain_opencv_pose
 from tracking.evaluation import evaluate
-from tracking.slam.scenes import away_and_back_keys, load_recording, render_sequence, run_tracker, scene_dict
+from scenes import away_and_back_keys, load_recording, render_sequence, run_tracker, scene_dict
 from tracking.tracker import Tracker, TrackResult
 
 ROOT = Path(__file__).resolve().parents[1]
