@@ -91,6 +91,15 @@ class _Fit:
     out_pose: np.ndarray | None = None
 
 
+def _has_content(gray) -> bool:
+    """False for a frame that is black, blown out or blank (nothing to track in it)."""
+    if gray is None:
+        return False
+    small = gray[::8, ::8]
+    m, s = float(small.mean()), float(small.std())
+    return 6.0 < m < 250.0 and s > 2.0
+
+
 @dataclass
 class TrackerConfig:
     """Every setting of `Tracker`, with its unit. `Tracker(camera, anchors, config=TrackerConfig(...))`, or
@@ -352,12 +361,7 @@ class Tracker:
         self._frame += 1
         bgr, gray = self._prepare(image)
         self._gray = gray
-        usable = gray is not None
-        if usable:
-            small = gray[::8, ::8]
-            m, s = float(small.mean()), float(small.std())
-            usable = 6.0 < m < 250.0 and s > 2.0   # black, blown-out or blank: nothing to see
-        if not usable:
+        if not _has_content(gray):
             return self._lost_frame(t0, 0)
         if not self.slam:
             return self._marker_only(bgr, t, t0)
@@ -368,22 +372,9 @@ class Tracker:
         anchor_first = (self.anchor_first and self._last_state == "marker" and self._lost == 0
                         and self.motion.last is not None)
         if anchor_first:
-            # Anchors were measured last frame: the anchor tracker re-finds them at their predicted place
-            # (no detector pass, a few ms) and its pose is the most accurate there is. Keypoint
-            # work (ORB, matching, keyframes) runs only every `keypoint_every` frames to grow the map,
-            # or when the anchors are not found.
-            ar = self._anchors.process(gray, t, self._reference(t))
-            self._since_detect = 0
-            pose = self._anchor_output(ar) if self._anchor_usable(ar) else None
-            if (pose is not None and self._frame - self._full_frame < self.keypoint_every
-                    and self._plausible(pose, self.motion.last, t)):
-                jumped = self._jumped(ar, t)
-                got = self._follow_from_last(gray, t) if self._moving_fast(ar, t) or jumped else None
-                if self._smeared(ar, got, gray, t) or (jumped and self._flow_disagrees(ar, got, t)):
-                    return self._flow_result(got, t, t0, int(ar.markers))
-                self._flow = None   # flow restarts from the next full frame (or from this image)
-                return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, int(ar.markers),
-                                    int(ar.inliers), t, t0)
+            res, ar = self._anchors_first(gray, t, t0)
+            if res is not None:
+                return res
             detect = False
         elif not detect and self.klt:
             res = self._klt_frame(gray, t, t0)
@@ -435,21 +426,47 @@ class Tracker:
         else:
             fit = self._from_map(feats, pred, ids, X, D, t)
         if fit is None:
-            if not flow_tried:
-                got = self._follow_from_last(gray, t)
-            if got is not None:
-                return self._flow_result(got, t, t0, markers)
-            if ar is not None and ar.covered and ar.world_from_camera is not None:
-                # nothing else holds the pose: the partly covered anchors, as their filter weighed them
-                cw, cuv, n = self._anchor_points(ar, covered_too=True)
-                pose = np.asarray(ar.world_from_camera, float)
-                return self._finish(pose, pred, "marker", "anchors", None, n, len(cw), t, t0)
-            return self._lost_frame(t0, markers)
-
+            return self._without_fit(gray, t, t0, got, flow_tried, ar, pred, markers)
         self.map.count_matches(fit.visible, fit.point_ids)
         self._maybe_keyframe(t, fit.pose, feats, fit.point_ids, fit.feature_idx, corners_w, corners_uv, fit.state,
                              fit.points, fit.inliers)
-        # keypoints to follow by optical flow until the next full frame
+        self._start_tracks(gray, feats, fit)
+        return self._finish(fit.pose, pred, fit.state, fit.source, fit.out_pose, markers, fit.inliers, t, t0)
+
+    def _anchors_first(self, gray, t, t0):
+        """Anchors were measured last frame: the anchor tracker re-finds them at their predicted place (no
+        detector pass, a few ms) and its pose is the most accurate there is. Keypoint work (ORB, matching,
+        keyframes) runs only every `keypoint_every` frames to grow the map, or when the anchors are not found.
+        Returns (result, anchor result); result is None when the full frame's work must run."""
+        ar = self._anchors.process(gray, t, self._reference(t))
+        self._since_detect = 0
+        pose = self._anchor_output(ar) if self._anchor_usable(ar) else None
+        if (pose is None or self._frame - self._full_frame >= self.keypoint_every
+                or not self._plausible(pose, self.motion.last, t)):
+            return None, ar
+        jumped = self._jumped(ar, t)
+        got = self._follow_from_last(gray, t) if self._moving_fast(ar, t) or jumped else None
+        if self._smeared(ar, got, gray, t) or (jumped and self._flow_disagrees(ar, got, t)):
+            return self._flow_result(got, t, t0, int(ar.markers)), ar
+        self._flow = None   # flow restarts from the next full frame (or from this image)
+        return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, int(ar.markers),
+                            int(ar.inliers), t, t0), ar
+
+    def _without_fit(self, gray, t, t0, got, flow_tried, ar, pred, markers) -> TrackResult:
+        """Neither anchors nor the map gave a pose: flow from the last frame, else the partly covered
+        anchors as their filter weighed them, else lost."""
+        if not flow_tried:
+            got = self._follow_from_last(gray, t)
+        if got is not None:
+            return self._flow_result(got, t, t0, markers)
+        if ar is not None and ar.covered and ar.world_from_camera is not None:
+            cw, cuv, n = self._anchor_points(ar, covered_too=True)
+            pose = np.asarray(ar.world_from_camera, float)
+            return self._finish(pose, pred, "marker", "anchors", None, n, len(cw), t, t0)
+        return self._lost_frame(t0, markers)
+
+    def _start_tracks(self, gray, feats, fit) -> None:
+        """Keypoints of this full frame to follow by optical flow until the next one."""
         self._flow = None
         n = fit.feature_idx.size
         if n:
@@ -457,7 +474,6 @@ class Tracker:
             sel = np.arange(n) if n <= MAX_TRACKS else np.linspace(0, n - 1, MAX_TRACKS).astype(int)
             self._flow = Tracks(gray, feats.xy[fit.feature_idx[sel]].astype(np.float32), fit.points[sel].copy())
         self._full_tracks = int(min(n, MAX_TRACKS))
-        return self._finish(fit.pose, pred, fit.state, fit.source, fit.out_pose, markers, fit.inliers, t, t0)
 
     def _anchor_points(self, ar, covered_too: bool = False) -> tuple[np.ndarray, np.ndarray, int]:
         """The anchors' measured corners this frame: world points (N,3), undistorted pixels (N,2) and the
