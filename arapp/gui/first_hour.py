@@ -14,7 +14,7 @@ from pathlib import Path
 
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QAction, QGuiApplication
-from PySide6.QtWidgets import QDockWidget, QMenu, QScrollArea
+from PySide6.QtWidgets import QDockWidget, QMenu
 
 from tracking.default_intrinsics import is_estimated
 
@@ -22,6 +22,7 @@ from arapp.app import sourcespec
 from arapp.gui.calibration_wizard import CalibrationWizard
 from arapp.gui.help import add_help_menu
 from arapp.gui.printer_setup import PrinterSetupDialog
+from arapp.gui.side_panels import scroll_side_panels
 from arapp.gui.welcome import CalibrationBanner, LostHint, WelcomeView
 
 DEMO_MODEL = Path(__file__).resolve().parents[2] / "models" / "vase.json"
@@ -30,18 +31,7 @@ DEMO_MODEL = Path(__file__).resolve().parents[2] / "models" / "vase.json"
 def fit_to_screen(window) -> None:
     """Side panels scroll instead of setting the window's minimum height, and the window is no larger than
     the screen's available area (a 1366x768 laptop screen showed neither the replay bar nor the status bar)."""
-    for dock in window.findChildren(QDockWidget):
-        inner = dock.widget()
-        if inner is None or isinstance(inner, QScrollArea):
-            continue
-        area = QScrollArea()
-        area.setWidgetResizable(True)
-        area.setFrameShape(QScrollArea.Shape.NoFrame)
-        area.setWidget(inner)
-        # as wide as the panel likes to be (its fields and buttons unclipped), only its height scrolls
-        area.setMinimumWidth(max(inner.minimumSizeHint().width(), min(inner.sizeHint().width(), 460))
-                             + area.verticalScrollBar().sizeHint().width())
-        dock.setWidget(area)
+    scroll_side_panels(window)  # as wide as each panel needs (its fields unclipped), only its height scrolls
     screen = window.screen()
     # Qt's offscreen platform has no real screen (800x600 by default): keep the designed size there, so
     # pictures made headless (--screenshot) look as on a desktop

@@ -24,6 +24,7 @@ from PySide6.QtWidgets import (
 )
 
 from arapp.exchange.meshes import file_filter
+from arapp.gui.compact_spin import CompactSpin
 from arapp.pipeline import MODES
 from arapp.placement import Placement
 
@@ -45,8 +46,10 @@ def library_files(folder: Path | None = None) -> list[Path]:
     return sorted(folder.glob("*.json")) if folder.is_dir() else []
 
 
-def _spin(lo: float, hi: float, step: float, decimals: int, suffix: str = "") -> QDoubleSpinBox:
-    s = QDoubleSpinBox()
+def _spin(lo: float, hi: float, step: float, decimals: int, suffix: str = "",
+          sample: str | None = None, suffix_room: str = "") -> QDoubleSpinBox:
+    """A spin box; with `sample` (a typical value's text) sized for that value, not the range's ends."""
+    s = QDoubleSpinBox() if sample is None else CompactSpin(sample, suffix_room)
     s.setRange(lo, hi)
     s.setSingleStep(step)
     s.setDecimals(decimals)
@@ -133,7 +136,9 @@ class ModelPanel(QWidget):
             s.valueChanged.connect(self._selection_changed)
         ef.addRow(sel)
         self.weight = _spin(-100.0, 100.0, 0.1, 3)
-        self.position = [_spin(-1e6, 1e6, 0.1, 3) for _ in range(3)]
+        # a control point's coordinates are a few hundred model units at most in practice; the range only
+        # keeps a typed value from being cut off; room for a unit such as " mm", set when a model loads
+        self.position = [_spin(-1e6, 1e6, 0.1, 3, sample="-000.000", suffix_room=" mm") for _ in range(3)]
         ef.addRow("Weight", self.weight)
         pos_row = QHBoxLayout()
         for s in self.position:
@@ -197,9 +202,9 @@ class ModelPanel(QWidget):
         self.current.setText(f"<b>{name}</b> &nbsp; {Path(path).name}" + (
             f", {len(surfaces)} NURBS surface{'s' if len(surfaces) != 1 else ''}" if surfaces else ", mesh"))
         self.set_placement(placement)
-        # control points are in the model file's own unit (placement is in mm)
+        # control points are in the model file's own unit (placement is in mm); each field shows it, so the
+        # label stays short and the panel keeps its width
         units = str(getattr(model, "units", "") or "model units")
-        self.position_label.setText(f"Position ({units})")
         for box in self.position:
             box.setSuffix(f" {units}")
         self.set_model_loaded(True)
