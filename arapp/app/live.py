@@ -139,6 +139,10 @@ class LiveEngine:
         self.info: SourceInfo | None = None
         self.autoplay = playing
         self.first_ready = False
+        # stop() and the source's opening meet here: a source that opens after stop() (a camera answering
+        # after the session gave up on it) starts no processing thread that nothing would stop
+        self._life = threading.Lock()
+        self._stopped = False
         # the processing side's view of the model, copied into each frame's `extra`
         self.state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0, "toolpaths": None}
         self._models: dict = {}  # path -> the model as loaded (SetModel without a model object)
@@ -155,16 +159,19 @@ class LiveEngine:
 
     def _opened(self, source) -> None:
         """Capture thread, once the source is open: describe it and start the processing thread."""
-        info = source_info(source, self.name, self.default_anchors)
-        if info.camera is None:
-            raise RuntimeError(f"{self.name}: the source has no camera calibration; tracking needs one")
-        if not info.anchors:
-            raise RuntimeError(f"{self.name}: no anchors are configured; set them in the tracking panel")
-        self.info = info
-        processor = Processor(lambda: self.pipeline_factory(source, info), self.captured, self.shown,
-                              on_ready=self._ready, on_error=self.events.error.emit,
-                              skipped=lambda: self.player.skipped, wrap=self.wrap)
-        self.stage.start(processor)
+        with self._life:
+            if self._stopped:
+                return  # the player sees its stop next and closes the source
+            info = source_info(source, self.name, self.default_anchors)
+            if info.camera is None:
+                raise RuntimeError(f"{self.name}: the source has no camera calibration; tracking needs one")
+            if not info.anchors:
+                raise RuntimeError(f"{self.name}: no anchors are configured; set them in the tracking panel")
+            self.info = info
+            processor = Processor(lambda: self.pipeline_factory(source, info), self.captured, self.shown,
+                                  on_ready=self._ready, on_error=self.events.error.emit,
+                                  skipped=lambda: self.player.skipped, wrap=self.wrap)
+            self.stage.start(processor)
         if info.live and self.autoplay:
             self.player.play()  # a camera does not wait
         self.events.opened.emit(info)
@@ -179,6 +186,8 @@ class LiveEngine:
     def stop(self, wait: float = 0.0) -> None:
         """Ask both threads to finish (they close the source and the pipeline themselves); optionally join.
         An AR video being written is finished first (an MP4 cut off before its index cannot be played)."""
+        with self._life:
+            self._stopped = True
         if self.ar_video is not None:
             self.ar_record_stop()
         closing = self._ar_closing

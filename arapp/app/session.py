@@ -26,6 +26,7 @@ from arapp.app import recording
 from arapp.app.editing import display_placement, edited_model, model_mesh
 from arapp.app.events import Events
 from arapp.app.capture import VIDEO_CODECS, new_capture_path, save_screenshot
+from arapp.app.first_picture import FirstPictureWatch, no_picture_message
 from arapp.app.history import History
 from arapp.app.model_export import export_model
 from arapp.app.print_session import PrintSession
@@ -98,7 +99,8 @@ class Session:
     `playing`); settings: QSettings or `MemorySettings`; runner: how jobs run
     (arapp.app.runner). Events (all on the session's thread):
     source_opening(name), source_opened(SourceInfo), frame(Shown), ended(),
-    error(title, message), status(text, ms), recorded(folder),
+    source_failed(name, line): the source was given up before its first picture (line: what to show
+    on the view, "" when the error message says it), error(title, message), status(text, ms), recorded(folder),
     model_loaded(model, path, placement), model_edited(model),
     placement_changed(Placement), mode_changed(mode), playing_changed(bool),
     toolpaths_shown(info), recent_changed(), print_session(PrintSession).
@@ -140,6 +142,7 @@ class Session:
         self._drag = None  # (mode, grabbed paper point mm, placement at the grab, pose at the grab)
         self._edit = self.run.latest(retessellate, self._edit_done, self._edit_failed, name="arapp-edit")
         self.history = History(self)  # undo / redo of control-point edits and placement
+        self.first_picture = FirstPictureWatch()  # a source silent for its timeout_s is given up (`tick`)
 
     # -- errors and messages -------------------------------------------------------------
     def report(self, title: str, message: str) -> None:
@@ -210,6 +213,7 @@ class Session:
             engine.send(cmd.SetDisplaySize(self.display_size))
         self.events.source_opening.emit(name)
         engine.start()
+        self.first_picture.start()
         self._push_model()
         if self.highlight is not None:
             engine.send(cmd.Highlight(self.highlight))
@@ -231,6 +235,7 @@ class Session:
         self.events.playing_changed.emit(False)
 
     def close_source(self) -> None:
+        self.first_picture.stop()
         if self.engine is not None:
             self.stop_ar_recording()
             self.engine.stop()
@@ -261,19 +266,36 @@ class Session:
 
     def _engine_error(self, engine, title: str, message: str) -> None:
         """An engine's error reaches the user; when the open source fails before it opened, the session
-        goes back to having no source (source_failed(name) tells the GUI to reset its widgets)."""
+        goes back to having no source (`_give_up_source`)."""
         self.report(title, message)
         if engine is not None and engine is self.engine and self.source_info is None:
-            name = display_name(self.source_spec) if self.source_spec else ""
-            self.close_source()
-            self.source_spec = None
-            self.last_shown = None
-            self.events.playing_changed.emit(False)
-            self.events.source_failed.emit(name)
+            self._give_up_source("")
+
+    def _give_up_source(self, line: str) -> None:
+        """Back to having no source: the engine stopped, nothing remembered of it; source_failed(name, line)
+        tells the GUI to reset its widgets."""
+        name = display_name(self.source_spec) if self.source_spec else ""
+        self.close_source()
+        self.source_spec = None
+        self.last_shown = None
+        self.events.playing_changed.emit(False)
+        self.events.source_failed.emit(name, line)
+
+    def tick(self) -> None:
+        """The session's time-based checks; call a few times a second on the session's thread (the GUI's
+        status timer does). A source with no picture after `first_picture.timeout_s` is given up: the user
+        is told what failed and what to do, and its engine is stopped."""
+        if self.engine is None or not self.first_picture.expired():
+            return
+        spec = self.source_spec or ""
+        title, line = no_picture_message(display_name(spec), spec, self.first_picture.timeout_s)
+        self.report(title, line)
+        self._give_up_source(line)
 
     def _frame_ready(self) -> None:
         shown = self.engine.take() if self.engine is not None else None
         if shown is not None:
+            self.first_picture.stop()
             self.last_shown = shown
             self.events.frame.emit(shown)
 

@@ -24,6 +24,14 @@ def is_seekable(source) -> bool:
             and int(getattr(source, "frame_count", 0) or 0) > 0)
 
 
+def is_live_spec(spec: str) -> bool:
+    """Whether a spec names a camera (before it is opened); False for one that does not parse."""
+    try:
+        return parse_spec(spec).live
+    except SourceError:
+        return False
+
+
 def split_calibration(spec: str) -> tuple[str, str | None]:
     """('file:video.mp4', 'cam.yaml') from 'file:video.mp4?calibration=cam.yaml'."""
     s = parse_spec(spec)

@@ -104,11 +104,12 @@ class Habits:
         self.undo_action.setEnabled(st["undo"])
         self.redo_action.setEnabled(st["redo"])
 
-    def _source_failed(self, name: str) -> None:
-        """Back to 'no source': no 'Opening...' left on the view, Play not 'Pause'."""
+    def _source_failed(self, name: str, line: str = "") -> None:
+        """Back to 'no source': no 'Opening...' left on the view, Play not 'Pause'; the view says `line`
+        (what failed and what to do) when the session gave one."""
         w = self.w
         w.status_source.setText("no source")
-        w.view.message = (f"Could not open {name}; see the message. " if name else "") + \
+        w.view.message = line or (f"Could not open {name}; see the message. " if name else "") + \
             "Open a recording or a camera (File menu), or drop a recording folder here"
         w.view.set_image(None)
         w.replay.set_playing(False)

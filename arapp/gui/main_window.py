@@ -75,6 +75,7 @@ class MainWindow(QMainWindow):
         self._status_timer = QTimer(self)
         self._status_timer.setInterval(250)
         self._status_timer.timeout.connect(self._refresh_status)
+        self._status_timer.timeout.connect(self.session.tick)  # the session's clock: a silent source is given up
         self._status_timer.start()
         install_habits(self)  # undo/redo, export, screenshot, AR video, title, controls enabled when they can act
         install_first_hour(self)  # welcome, calibration banner + wizard, lost hint, printer set-up, Help

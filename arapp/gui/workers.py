@@ -22,7 +22,7 @@ from arapp.app.live import EngineFacade, LiveEngine, SourceInfo, default_pipelin
 from arapp.app.processor import Shown, to_bgra
 from arapp.gui.remote import EngineSignals, RemoteEngine
 
-__all__ = ["Engine", "make_engine", "bgr_qimage", "qimage_from_bgra", "SourceInfo", "Shown"]
+__all__ = ["Engine", "make_engine", "connect_handlers", "bgr_qimage", "qimage_from_bgra", "SourceInfo", "Shown"]
 
 
 def qimage_from_bgra(bgra: np.ndarray) -> QImage:
@@ -86,6 +86,11 @@ def make_engine(kind: str, spec: str, *, name: str, anchors: list, speed: float,
     else:
         engine = RemoteEngine(spec, name=name, anchors_json=[a.to_dict() for a in anchors], speed=speed,
                               loop=loop, full_frames=full_frames, parent=parent)
+    return connect_handlers(engine, handlers)
+
+
+def connect_handlers(engine, handlers):
+    """Wire a GUI engine's signals (EngineSignals) to a session's `handlers`; returns the engine."""
     engine.opened.connect(handlers.opened)
     engine.frame_ready.connect(handlers.ready)
     engine.error.connect(handlers.error)
