@@ -3,7 +3,8 @@
 The GUI's event loop delivers an engine's events on the UI thread; here a
 queue does: the worker threads put (handler, args) into it and the driver's
 thread calls `pump()` (or `wait_until`) to run them, so the session is only
-ever touched from one thread, as in the GUI.
+ever touched from one thread, as in the GUI. The session's time limits (a
+source with no first picture) act when the driver calls `session.tick()`.
 
     events = EventQueue()
     session = Session(headless_engine_factory(events))
