@@ -48,7 +48,7 @@ from tracking.poses import rotation_angle
 from tracking.session import AnchorSpec
 from tracking.slam.features import FeatureExtractor, Features
 from tracking.anchors.edges import edge_sharpness
-from tracking.slam.flow import Tracks, follow, seed_on_plane
+from tracking.slam.flow import Tracks, follow, relift, seed_on_plane
 from tracking.slam.fusion import PoseBlender, fuse_pose
 from tracking.slam.map import Map
 from tracking.slam.mapping import KeyframeRequest, LocalMapper
@@ -281,6 +281,8 @@ class Tracker:
         self._anchor_t: float | None = None   # when the anchors last gave the pose
         self._via_flow = False                 # the last frame's pose came from flow
         self._flow_start: float | None = None  # when flow alone began to carry the pose
+        self._followed: tuple[int, tuple | None] | None = None   # (frame, `_follow_from_last`'s result there)
+        self._anchor_corners: np.ndarray | None = None   # world corners (N,3) the anchors measured last
 
     def reset(self) -> None:
         """Forget the map and the motion; the next frame starts from the anchors."""
@@ -390,6 +392,7 @@ class Tracker:
             got, flow_tried = self._follow_from_last(gray, t), True
             if fut is not None:
                 ar = fut.result()
+                self._note_anchors(ar)
                 self._since_detect = 0
                 detect = False
             else:
@@ -404,12 +407,20 @@ class Tracker:
         # (and always when the anchors were just lost: the map has to take over on this very frame)
         need_feats = (not (young and (detect or ar is not None)) or self._frame - self._kf_frame >= 5
                       or len(self.map.keyframes) == 0 or (ar is not None and not self._anchor_usable(ar)))
-        feats = self.extractor.extract(gray) if need_feats else Features.empty()
+        # an empty map (nothing to match, no keyframe on its way) needs this frame's features only if the
+        # anchors are found in it, to start the map: not extracted beside the detection then, but after it
+        defer = need_feats and fut is not None and len(self.map.keyframes) == 0 and self.mapper.pending == 0
+        feats = self.extractor.extract(gray) if need_feats and not defer else Features.empty()
         if fut is not None:
+            if self._fast_predicted(t):
+                self._follow_from_last(gray, t)   # while the detection runs (the result is kept for this frame)
             ar = fut.result()
+            self._note_anchors(ar)
             self._since_detect = 0
         elif ar is None:
             self._since_detect += 1
+        if defer and len(self._anchor_points(ar)[0]):
+            feats = self.extractor.extract(gray)
         if (not flow_tried and self._anchor_usable(ar)
                 and self._plausible(self._anchor_output(ar), self.motion.last, t)):
             jumped = self._jumped(ar, t)
@@ -437,9 +448,21 @@ class Tracker:
         """Anchors were measured last frame: the anchor tracker re-finds them at their predicted place (no
         detector pass, a few ms) and its pose is the most accurate there is. Keypoint work (ORB, matching,
         keyframes) runs only every `keypoint_every` frames to grow the map, or when the anchors are not found.
-        Returns (result, anchor result); result is None when the full frame's work must run."""
-        ar = self._anchors.process(gray, t, self._reference(t))
+        Returns (result, anchor result); result is None when the full frame's work must run.
+
+        When the motion model moves the anchors' last corners `smear_px` or more, the flow this frame
+        will need (`_moving_fast`) runs on this thread while the anchors are measured on the worker
+        (OpenCV releases the interpreter): the same result as one after the other, in the time of the
+        longer of the two."""
+        ref = self._reference(t)
+        if self._fast_predicted(t):
+            fut = self._pool.submit(self._anchors.process, gray, t, ref)
+            self._follow_from_last(gray, t)   # kept for this frame (`_follow_from_last` remembers it)
+            ar = fut.result()
+        else:
+            ar = self._anchors.process(gray, t, ref)
         self._since_detect = 0
+        self._note_anchors(ar)
         pose = self._anchor_output(ar) if self._anchor_usable(ar) else None
         if (pose is None or self._frame - self._full_frame >= self.keypoint_every
                 or not self._plausible(pose, self.motion.last, t)):
@@ -448,7 +471,9 @@ class Tracker:
         got = self._follow_from_last(gray, t) if self._moving_fast(ar, t) or jumped else None
         if self._smeared(ar, got, gray, t) or (jumped and self._flow_disagrees(ar, got, t)):
             return self._flow_result(got, t, t0, int(ar.markers)), ar
-        self._flow = None   # flow restarts from the next full frame (or from this image)
+        # the flow's points, now measured in this image, are followed on from here (their plane seeds
+        # placed from the anchors' pose, as new seeds would be); without flow it restarts next time
+        self._flow = None if got is None else relift(self.camera, got[1], pose)
         return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, int(ar.markers),
                             int(ar.inliers), t, t0), ar
 
@@ -580,6 +605,15 @@ class Tracker:
         """One frame of optical flow from the last tracked frame: its flow points or map inliers,
         topped up with points seeded on the anchors' plane in the last image. (pose, tracks now
         measured in `gray`), or None when the flow does not hold or the pose is implausible."""
+        # computed at most once a frame (also ahead of need, beside the anchors): the state it reads does
+        # not change within a frame before the pose is final
+        if self._followed is not None and self._followed[0] == self._frame:
+            return self._followed[1]
+        got = self._follow_uncached(gray, t)
+        self._followed = (self._frame, got)
+        return got
+
+    def _follow_uncached(self, gray, t) -> tuple[np.ndarray, Tracks] | None:
         # no velocity yet (just (re)acquired): a flow started at zero motion can lock onto a look-alike
         # of each point (tiles, any repeated texture) and give a wrong pose that holds together
         if (not self.flow or self._lost > 0 or self.motion.velocity is None or self._prev_gray is None
@@ -644,6 +678,22 @@ class Tracker:
         # the flow must confirm the prediction to within a pixel: a flow pose that merely leans toward it
         # (drifting over repeated texture) proves nothing against a marker
         return to_seen > self.jump_px and to_pred < min(0.5 * to_seen, self.jump_px)
+
+    def _note_anchors(self, ar) -> None:
+        """Remember the corners the anchors measured (for `_fast_predicted` on the next frame)."""
+        if ar is not None and ar.raw_world_from_camera is not None and len(ar.object_points) >= 4:
+            self._anchor_corners = np.asarray(ar.object_points, float).reshape(-1, 3)
+
+    def _fast_predicted(self, t) -> bool:
+        """Whether the motion model alone moves the corners the anchors last measured `smear_px` or more in
+        the image since the last frame: the flow will very likely be needed this frame, so it is worth
+        starting before the anchors' measurement is in (it only ever runs ahead, never changes results)."""
+        if (not self.flow or self._pool is None or self.motion.last is None or self._anchor_corners is None
+                or self.motion.velocity is None or self._prev_gray is None):
+            return False
+        last = self.camera.project_world(self._anchor_corners, self.motion.last)
+        moved = np.linalg.norm(self.camera.project_world(self._anchor_corners, self.motion.predict(t)) - last, axis=1)
+        return bool(moved.max() >= self.smear_px)
 
     def _moving_fast(self, ar, t) -> bool:
         """Whether the anchors may have moved more than smear_px in the image since the last frame, by the

@@ -15,6 +15,13 @@ Where the followed points come from:
   triangulates nothing). Seeds off the plane disagree with the others as soon
   as the camera moves sideways and are dropped by the robust fit.
 
+Seeds are Shi-Tomasi corners found on the half-resolution image (a quarter of
+the full image's cost; where exactly a seed sits does not matter, the flow
+follows the patch around it and the plane gives its world point). Plane seeds
+stay marked (`Tracks.planar`): followed into a frame whose pose the anchors
+measured, they can be placed on the plane again from that pose (`relift`)
+instead of being seeded afresh.
+
 Pixels: `xy` are distorted image pixels (what the flow measures); the pose fit
 works on undistorted pixels. World points in metres, poses `world_from_camera`.
 """
@@ -33,18 +40,27 @@ WINDOW = (21, 21)       # pixels: big enough to hold a smeared corner
 LEVELS = 3              # pyramid levels above the image: with a predicted start, 30+ px/frame is fine
 MAX_PATCH_ERROR = 30.0  # mean absolute grey difference of a followed patch; above it the point was lost
 CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 20, 0.03)
+HALF_RES_FROM = 320     # pixels of image width from which seeds are found on the half-resolution image
+SEED_QUALITY = 0.01     # Shi-Tomasi quality level of a seed, relative to the image's strongest corner
 
 
 @dataclass
 class Tracks:
     """Points followed by flow. `image` the grey frame they were measured in; `xy` their distorted
     pixels there (N,2) float32; `X` the world points they image (N,3) metres; `moved` how far each
-    moved from the frame before, pixels (N,2), when they were followed into this one."""
+    moved from the frame before, pixels (N,2), when they were followed into this one; `planar` (N,) bool,
+    which of them were placed on the anchors' plane from a pose (seeds; the others are map points), None
+    for none."""
 
     image: np.ndarray
     xy: np.ndarray
     X: np.ndarray
     moved: np.ndarray | None = None
+    planar: np.ndarray | None = None
+
+    def planar_mask(self) -> np.ndarray:
+        """`planar` as a bool array (N,) (all False when None)."""
+        return np.zeros(len(self), bool) if self.planar is None else np.asarray(self.planar, bool)
 
     def image_motion(self) -> np.ndarray | None:
         """The median motion (2,) of the points from the frame before, pixels; None if not followed."""
@@ -77,25 +93,59 @@ def lift_to_plane(camera: Camera, world_from_camera: np.ndarray, xy: np.ndarray,
     return X, ok
 
 
+def _corners(gray: np.ndarray, n: int, min_distance: int, taken: np.ndarray) -> np.ndarray:
+    """Up to n Shi-Tomasi corners (N,2) float32 full-resolution pixels of `gray`, at least about
+    min_distance pixels from each other and from the pixels `taken` (M,2); on the half-resolution image
+    when the image is wide enough (a quarter of the cost: the corner measure is the whole cost)."""
+    half = gray.shape[1] >= HALF_RES_FROM
+    img = cv2.pyrDown(gray) if half else gray
+    scale = 2.0 if half else 1.0
+    radius = max(1, int(round(min_distance / scale)))
+    mask = np.zeros(img.shape[:2], np.uint8)
+    if len(taken):
+        # the taken pixels widened to discs by one dilation (no drawing loop over the points)
+        ij = np.rint(np.asarray(taken, float) / scale).astype(int)
+        ij = ij[(ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < img.shape[1]) & (ij[:, 1] < img.shape[0])]
+        mask[ij[:, 1], ij[:, 0]] = 255
+        mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1)))
+    got = cv2.goodFeaturesToTrack(img, n, SEED_QUALITY, min_distance / scale, mask=255 - mask, blockSize=3 if half else 5)
+    # pyrDown keeps the even rows and columns: half-resolution pixel (x, y) is full pixel (2x, 2y)
+    return np.zeros((0, 2), np.float32) if got is None else (scale * got.reshape(-1, 2)).astype(np.float32)
+
+
 def seed_on_plane(camera: Camera, gray: np.ndarray, world_from_camera: np.ndarray, n: int = 300,
                   keep: Tracks | None = None, min_distance: int = 10) -> Tracks:
     """Tracks for the grey image `gray` taken at `world_from_camera`: the points of `keep` (if any,
     measured in this same image) plus up to n - len(keep) new corners (Shi-Tomasi), away from those,
-    placed on the anchors' plane."""
+    placed on the anchors' plane (marked `planar`)."""
     xy = np.zeros((0, 2), np.float32) if keep is None else keep.xy
     X = np.zeros((0, 3)) if keep is None else keep.X
+    planar = np.zeros(0, bool) if keep is None else keep.planar_mask()
     want = n - xy.shape[0]
     if want > 0:
-        mask = np.full(gray.shape, 255, np.uint8)
-        for u, v in xy:
-            cv2.circle(mask, (int(u), int(v)), min_distance, 0, -1)
-        new = cv2.goodFeaturesToTrack(gray, want, 0.01, min_distance, mask=mask, blockSize=5)
-        if new is not None:
-            new = new.reshape(-1, 2)
+        new = _corners(gray, want, min_distance, xy)
+        if len(new):
             Xn, ok = lift_to_plane(camera, world_from_camera, new)
-            xy = np.vstack([xy, new[ok].astype(np.float32)])
+            xy = np.vstack([xy, new[ok]])
             X = np.vstack([X, Xn[ok]])
-    return Tracks(gray, np.ascontiguousarray(xy, np.float32), X)
+            planar = np.concatenate([planar, np.ones(int(ok.sum()), bool)])
+    return Tracks(gray, np.ascontiguousarray(xy, np.float32), X, planar=planar)
+
+
+def relift(camera: Camera, tracks: Tracks, world_from_camera: np.ndarray) -> Tracks:
+    """`tracks` with their plane seeds placed on the anchors' plane again from `world_from_camera` (the pose
+    of the image they were measured in, e.g. the anchors' measurement there): as if seeded in that image,
+    without looking for corners again. Seeds no longer usable from there are dropped; map points stay."""
+    planar = tracks.planar_mask()
+    if not planar.any():
+        return tracks
+    X = tracks.X.copy()
+    Xn, ok = lift_to_plane(camera, world_from_camera, tracks.xy[planar])
+    X[planar] = Xn
+    keep = ~planar
+    keep[planar] = ok
+    return Tracks(tracks.image, np.ascontiguousarray(tracks.xy[keep]), X[keep],
+                  None if tracks.moved is None else tracks.moved[keep], planar[keep])
 
 
 def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarray, min_inliers: int = 20,
@@ -135,5 +185,6 @@ def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarr
             return None
     keep = idx[inl]
     moved = nxt[keep] - tracks.xy[keep]
-    return pose, Tracks(gray, np.ascontiguousarray(nxt[keep], np.float32), tracks.X[keep], moved)
+    planar = None if tracks.planar is None else tracks.planar_mask()[keep]
+    return pose, Tracks(gray, np.ascontiguousarray(nxt[keep], np.float32), tracks.X[keep], moved, planar)
 

@@ -67,24 +67,28 @@ def refine_pose(K: np.ndarray, world_from_camera: np.ndarray, X: np.ndarray, uv:
                 active[a[~good]] = False
                 continue
             iz = 1.0 / z
-            proj = np.stack([fx * Xc[:, 0] * iz + K[0, 2], fy * Xc[:, 1] * iz + K[1, 2]], axis=1)
-            r = proj - uv[a]
-            e = np.sqrt((r**2).sum(1) / s2[a])
+            x, y = Xc[:, 0] * iz, Xc[:, 1] * iz   # normalised image coordinates
+            r = np.empty((a.size, 2))
+            r[:, 0] = fx * x + K[0, 2] - uv[a, 0]
+            r[:, 1] = fy * y + K[1, 2] - uv[a, 1]
+            e = np.sqrt((r * r).sum(1) / s2[a])
             hw = w[a] * np.where(e <= huber, 1.0, huber / np.maximum(e, 1e-12))
-            # d proj / d Xc
-            x, y = Xc[:, 0], Xc[:, 1]
-            Jp = np.zeros((a.size, 2, 3))
-            Jp[:, 0, 0] = fx * iz
-            Jp[:, 0, 2] = -fx * x * iz * iz
-            Jp[:, 1, 1] = fy * iz
-            Jp[:, 1, 2] = -fy * y * iz * iz
-            # d Xc / d xi for a left perturbation: [-[Xc]x | I]
-            Jx = np.zeros((a.size, 3, 6))
-            Jx[:, 0, 1], Jx[:, 0, 2] = Xc[:, 2], -Xc[:, 1]
-            Jx[:, 1, 0], Jx[:, 1, 2] = -Xc[:, 2], Xc[:, 0]
-            Jx[:, 2, 0], Jx[:, 2, 1] = Xc[:, 1], -Xc[:, 0]
-            Jx[:, 0, 3] = Jx[:, 1, 4] = Jx[:, 2, 5] = 1.0
-            J = (Jp @ Jx).reshape(-1, 6)  # (2n, 6)
+            # d proj / d xi for a left perturbation (omega, v) of camera_from_world: the projection's
+            # derivative times d Xc / d xi = [-[Xc]x | I], written out per row (no per-point matrix products)
+            J = np.empty((a.size, 2, 6))
+            J[:, 0, 0] = -fx * x * y
+            J[:, 0, 1] = fx * (1.0 + x * x)
+            J[:, 0, 2] = -fx * y
+            J[:, 0, 3] = fx * iz
+            J[:, 0, 4] = 0.0
+            J[:, 0, 5] = -fx * x * iz
+            J[:, 1, 0] = -fy * (1.0 + y * y)
+            J[:, 1, 1] = fy * x * y
+            J[:, 1, 2] = fy * x
+            J[:, 1, 3] = 0.0
+            J[:, 1, 4] = fy * iz
+            J[:, 1, 5] = -fy * y * iz
+            J = J.reshape(-1, 6)  # (2n, 6)
             JW = J * np.repeat(hw, 2)[:, None]
             H = JW.T @ J
             g = JW.T @ r.reshape(-1)
