@@ -20,6 +20,8 @@ import numpy as np
 
 from tracking.camera import Camera
 
+STRONG_STEP = 0.75   # with consensus_px: edge samples below this fraction of the marker's typical step are left out
+
 
 def _distort(camera: Camera, und: np.ndarray) -> np.ndarray:
     """Distorted pixels of undistorted pixels (same K)."""
@@ -30,11 +32,15 @@ def _distort(camera: Camera, und: np.ndarray) -> np.ndarray:
 
 
 def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, camera: Camera | None = None,
-                   min_contrast: float = 8.0) -> tuple[np.ndarray, np.ndarray]:
+                   min_contrast: float = 8.0, consensus_px: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Refine approximate square corners (M,4,2) (distorted pixels, consecutive corners along the sides).
 
     cell_px (M,): how far (pixels) each edge is from the next parallel edge inside/outside the square;
-    the search reaches 0.45 of it. Returns (refined (M,4,2), ok (M,) bool); quads that cannot be refined
+    the search reaches 0.45 of it. consensus_px: when set, each side's line is the one through two of its
+    edge samples that the most samples lie within `consensus_px` of (then refitted to those): a finger
+    over part of a side shifts a third of its samples by under a pixel, which the default median-based
+    rejection keeps; samples whose step across the edge is under STRONG_STEP of the marker's median step
+    are left out first. Returns (refined (M,4,2), ok (M,) bool); quads that cannot be refined
     (a side off the image or without contrast) are returned unchanged with ok False.
     """
     quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
@@ -98,6 +104,11 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
         pts = camera.undistort_points(pts)
     pts = pts.reshape(M, 4, ns, 2)
     wgt = valid.astype(np.float64)
+    if consensus_px is not None:
+        # a finger over the edge leaves a step from black to skin, well short of black to paper
+        typical = np.array([np.median(np.abs(contrast[m][valid[m]])) if valid[m].any() else 0.0 for m in range(M)])
+        strong = valid & (np.abs(contrast) >= STRONG_STEP * typical[:, None, None])
+        wgt = wgt * _consensus(pts, strong, consensus_px)
     for _ in range(2):
         cnt = wgt.sum(axis=-1)  # (M,4)
         c = (pts * wgt[..., None]).sum(axis=2) / np.maximum(cnt, 1)[..., None]
@@ -132,6 +143,22 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
     out[good] = corners[good]
     ok[good] = True
     return out, ok
+
+
+def _consensus(pts: np.ndarray, valid: np.ndarray, tol: float) -> np.ndarray:
+    """(M,4,ns) mask of the samples within `tol` pixels of the line through the pair of valid samples of
+    their side that the most valid samples lie within `tol` of (every pair tried)."""
+    M, S, ns, _ = pts.shape
+    i, j = np.triu_indices(ns, 1)
+    a, b = pts[:, :, i, :], pts[:, :, j, :]                                   # (M,4,P,2)
+    d = b - a
+    n = np.stack([-d[..., 1], d[..., 0]], axis=-1) / np.maximum(np.linalg.norm(d, axis=-1), 1e-9)[..., None]
+    dist = np.abs(np.einsum("mspk,msqk->mspq", n, pts) - (n * a).sum(-1)[..., None])   # (M,4,P,ns)
+    close = (dist <= tol) & valid[:, :, None, :]
+    pair_ok = valid[:, :, i] & valid[:, :, j] & (np.linalg.norm(d, axis=-1) > 2.0)
+    score = np.where(pair_ok, close.sum(-1), -1)
+    best = np.argmax(score, axis=-1)                                           # (M,4)
+    return np.take_along_axis(close, best[..., None, None], axis=2)[:, :, 0, :]
 
 
 def _fit_line(p: np.ndarray):

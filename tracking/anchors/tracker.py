@@ -10,7 +10,7 @@ import numpy as np
 
 from tracking.anchors.dictionaries import aruco_dictionary
 from tracking.anchors.detect import ArucoDetection, Observation, detector_parameters
-from tracking.anchors.edges import edge_sharpness
+from tracking.anchors.edges import edge_sharpness, refine_squares
 from tracking.anchors.filter import PoseFilter
 from tracking.anchors.model import AnchorModel, build_models, square_corners
 from tracking.anchors.occlusion import covered_fraction, is_covered
@@ -34,6 +34,8 @@ class AnchorResult:
     covered: the pose rests on markers whose white margin is partly covered (a hand reaching in): its
     corners may be off by pixels, the filter gave it little weight, and a caller with another source
     of pose (map, optical flow) should prefer that one.
+    refitted: a marker's margin was partly covered, but its corners were found again on the uncovered
+    parts of its edges (AnchorTracker._refit_covered); the measurement counts `refit_weight` in the filter.
     rejected: anchors (indices) detected this frame but left out as inconsistent: never seen before
     in this session and far from where the reference pose puts them (a look-alike pattern).
     """
@@ -48,6 +50,7 @@ class AnchorResult:
     anchors_seen: list[int] = field(default_factory=list)
     ms: float = 0.0
     covered: bool = False
+    refitted: bool = False
     rejected: list[int] = field(default_factory=list)
 
 
@@ -76,7 +79,10 @@ class AnchorTracker:
     counts less in the filter (motion blur biases corners by pixels).
     cover_fraction / cover_weight: an ArUco marker with a side whose white margin is at least
     `cover_fraction` covered (`occlusion.covered_fraction`) is left out when other markers carry the
-    pose, else its measurement counts `cover_weight` in the filter and the result says `covered`.
+    pose, else its corners are fitted again on the uncovered parts of its edges, starting from the
+    prediction (`_refit_covered`; the measurement then counts `refit_weight` in the filter and the result
+    says `refitted`), and where that fails its measurement counts `cover_weight` and the result says
+    `covered`.
     new_anchor_gate: a frame's anchor never seen before in this session, detected while a reference
     pose exists (the caller's, else the filter's prediction, else the first declared anchor in view),
     is used only if its corners lie within `new_anchor_gate` times its own image size (pixels, the
@@ -87,7 +93,8 @@ class AnchorTracker:
     def __init__(self, anchors: list[AnchorSpec], camera: Camera, filter: bool = True, *, roi: bool = True,
                  full_every: int = 10, track_markers: bool = True, outlier_px: float = 3.0, branch_decay: float = 0.8,
                  branch_switch: float = 6.0, smear_px: float = 10.0, smear_sharpness: float = 0.15,
-                 cover_fraction: float = 0.2, cover_weight: float = 0.1, new_anchor_gate: float = 0.5,
+                 cover_fraction: float = 0.2, cover_weight: float = 0.1, refit_weight: float = 0.3,
+                 new_anchor_gate: float = 0.5,
                  **filter_params):
         if not anchors:
             raise ValueError("AnchorTracker needs at least one anchor (the session's anchors list is empty)")
@@ -101,8 +108,12 @@ class AnchorTracker:
         self.filter = PoseFilter(**filter_params)
         self.smear_px, self.smear_sharpness = float(smear_px), float(smear_sharpness)
         self.cover_fraction, self.cover_weight = float(cover_fraction), float(cover_weight)
+        self.refit_weight = float(refit_weight)
         self.new_anchor_gate = float(new_anchor_gate)
         self.cover_max_markers = 2
+        self.cover_refit = True   # refit a covered lone marker's corners on its sides' uncovered parts
+        self.refitted = 0         # markers so refitted this session (diagnostics, tests)
+        self._refit_now: set[int] = set()
         self.roi = roi
         self.full_every = max(int(full_every), 1)
         self.track_markers = bool(track_markers)
@@ -193,7 +204,7 @@ class AnchorTracker:
         ref_cfw = invert(reference) if reference is not None else pred_cfw
         obs, rejected = self._screen_new(aruco_obs + qr_obs, ref_cfw)
         fast = self._moving_fast(pred_cfw)
-        obs, covered = self._drop_covered(gray, obs, fast)
+        obs, covered = self._drop_covered(gray, obs, fast, pred_cfw)
         obs = self._deskew(obs, t)
         sol = solve_pose(obs, self.world_from_anchor, self.camera, pred_cfw, outlier_px=self.outlier_px)
         if self._tracked_only and (sol is None or sol.rms > self.track_max_rms
@@ -201,7 +212,7 @@ class AnchorTracker:
             # markers re-found by tracking did not agree well: detect them properly this frame
             self.tracked_keys = set()
             obs, rejected = self._screen_new(self._detect_aruco(gray, pred_cfw) + qr_obs, ref_cfw)
-            obs, covered = self._drop_covered(gray, obs, fast)
+            obs, covered = self._drop_covered(gray, obs, fast, pred_cfw)
             obs = self._deskew(obs, t)
             sol = solve_pose(obs, self.world_from_anchor, self.camera, pred_cfw, outlier_px=self.outlier_px)
         if sol is not None and pred_cfw is not None and self._other_branch_wins(obs, sol):
@@ -225,6 +236,9 @@ class AnchorTracker:
             sigma = 2.0 * px_sigma / extent * lever / np.sqrt(max(n / 4.0, 1.0))
             covered = covered and bool(covered & set(sol.anchors))
             weight = self._smear_weight(gray, sol, raw) * (self.cover_weight if covered else 1.0)
+            res.refitted = bool(self._refit_now & set(sol.anchors))
+            if res.refitted:
+                weight *= self.refit_weight
             filt = self.filter.update(raw, t, depth, sigma, weight=weight)
             self.trusted.update(sol.anchors)
             res.covered = bool(covered)
@@ -341,14 +355,15 @@ class AnchorTracker:
         last, _ = project(self.camera, invert(self.filter.pose()), pts)
         return bool(np.median(np.linalg.norm(now - last, axis=1)) >= self.smear_px)
 
-    def _drop_covered(self, gray: np.ndarray, obs: list[Observation], fast: bool = False
-                      ) -> tuple[list[Observation], set[int]]:
+    def _drop_covered(self, gray: np.ndarray, obs: list[Observation], fast: bool = False,
+                      pred_cfw: np.ndarray | None = None) -> tuple[list[Observation], set[int]]:
         """Screen ArUco markers for a partly covered white margin (occlusion.covered_fraction). Covered
         markers are dropped while uncovered markers remain in the frame; otherwise all are kept and
         the anchors with covered markers are returned (their measurement is then down-weighted).
         Not while the camera moves fast (`fast`: blur lowers margins alike and is weighed separately),
         nor when more than `cover_max_markers` markers are in view (many markers outvote one marker's bad
         corners in the fit, and dropping markers would only cost precision)."""
+        self._refit_now = set()
         if self.cover_fraction <= 0 or fast or sum(ob.markers for ob in obs) > self.cover_max_markers:
             return obs, set()
         flagged: dict[int, np.ndarray] = {}
@@ -361,8 +376,17 @@ class AnchorTracker:
                 good += len(ob.img) // 4
                 continue
             bits = self.aruco.bits[m.spec.dictionary_id]
-            bad = np.array([is_covered(covered_fraction(gray, q, bits), self.cover_fraction)
-                            for q in ob.img.reshape(-1, 4, 2)])
+            quads = ob.img.reshape(-1, 4, 2).copy()
+            bad = np.array([is_covered(covered_fraction(gray, q, bits), self.cover_fraction) for q in quads])
+            if bad.any() and self.cover_refit and pred_cfw is not None:
+                fixed = self._refit_covered(gray, m, ob.groups[::4][bad], quads[bad], bits, pred_cfw)
+                if fixed is not None:
+                    quads[bad] = fixed
+                    bad[:] = False
+                    self.refitted += 1
+                    self._refit_now.add(ob.anchor)
+                    obs[k] = ob = Observation(ob.anchor, ob.obj, quads.reshape(-1, 2), ob.groups, ob.markers,
+                                              square=ob.square)
             good += int((~bad).sum())
             if bad.any():
                 flagged[k] = bad
@@ -380,6 +404,32 @@ class AnchorTracker:
                 out.append(Observation(ob.anchor, ob.obj[keep], ob.img[keep], ob.groups[keep], int((~bad).sum()),
                                        square=ob.square))
         return out, set()
+
+    def _refit_covered(self, gray, model: AnchorModel, ids, quads, bits: int, pred_cfw: np.ndarray):
+        """Corners (M,4,2) of partly covered markers `ids` (their detected corners `quads`), found again on
+        their edges where the predicted pose `pred_cfw` puts them (shifted onto the detection), or None.
+
+        A fingertip on a marker's border drags the detector's contour, and the edge fit started from it,
+        toward the finger; started from the prediction instead, the middle of each side (where the
+        edge fit samples) is mostly uncovered and the corners come out where the sides' lines meet. The
+        refit is kept only where at least three corners of each marker land within a pixel and a half (or
+        0.15 cell) of the detected ones: the prediction and the uncovered part of the detection agree."""
+        world = np.concatenate([model.to_world(model.markers[int(i)]) for i in ids])
+        start, z = project(self.camera, pred_cfw, world)
+        if np.any(z <= 0.01):
+            return None
+        start = start.reshape(-1, 4, 2)
+        # a lagging prediction is mostly shifted: move it onto the detection by the median offset of the
+        # four corners (one dragged corner cannot pull a median of four far)
+        start = start + np.median(quads - start, axis=1)[:, None, :]
+        cell = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).min(axis=1) / bits
+        refined, ok = refine_squares(gray, start, cell, self.camera, consensus_px=0.35)
+        if not ok.all():
+            return None
+        near = np.linalg.norm(refined - quads, axis=2) <= np.maximum(1.5, 0.15 * cell)[:, None]
+        if (near.sum(axis=1) < 3).any():
+            return None
+        return refined
 
     def _detect_aruco(self, gray: np.ndarray, pred_cfw: np.ndarray | None) -> list[Observation]:
         if not self.aruco.models:

@@ -138,6 +138,20 @@ TUNING_TWINS: dict[str, dict] = {
         "video": {"fourcc": "MJPG", "quality": 70},
         "supersample": 2,
     },
+    # A single 5.5 cm marker at ~0.44 m; fingertips reach across the white border onto the black edge
+    # (the case tune_hand_border lacks: a corner's edges partly covered, not just the paper around it).
+    "tune_hand_edge": {
+        "name": "tune_hand_edge", "seed": 305, "fps": 30, "duration": 2.5,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 61, "dist": [-0.05, 0.02, 0.0002, 0.0003, 0.0]},
+        "anchors": [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 23, "length": 0.055}],
+        "desk": {"size": [1.4, 1.1], "ppm": 2000, "seed": 405},
+        "trajectory": {"kind": "orbit", "azimuth_start": -70, "azimuth_end": -88, "distance": 0.44,
+                       "elevation": 61, "shake": {"pos_mm": 1.6, "rot_deg": 0.28, "freq_hz": 1.6}},
+        "effects": _webcam(occluder={"start": 0.5, "end": 2.1, "ramp": 0.5, "style": "border", "approach_deg": 100,
+                                     "reach": 0.027, "offset": -0.011}),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
     # A 4x4 GridBoard (36h12, 3.5 cm markers): over-exposed start, focus hunting, noisy sensor.
     "tune_webcam_board": {
         "name": "tune_webcam_board", "seed": 302, "fps": 30, "duration": 2.5,
