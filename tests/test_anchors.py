@@ -272,11 +272,14 @@ def test_smeared_markers_count_less_in_the_filter():
         ok = [i for i, p in enumerate(poses) if p is not None]
         return evaluate(gt_t[ok], np.array([poses[i] for i in ok]), gt_t, gt)
 
-    def track(**kw):
+    def track(unblur=None, **kw):
         tr = AnchorTracker(session.anchors, session.camera, **kw)
+        tr.unblur_px = unblur   # the weighting alone: the blur stretch fit (test_blur_stretch.py) takes much of the bias out first
         return score([tr.process(img, t).world_from_camera for t, img, _ in frames])
 
     weighted, unweighted = track(), track(smear_sharpness=0.0)   # 0 turns the weighting off
+    both = track(unblur=2.0)
+    assert both.jitter_m < weighted.jitter_m
     plain = score([plain_opencv_pose(session.anchors, session.camera, img) for _, img, _ in frames])
     assert weighted.tracked == unweighted.tracked == plain.tracked
     assert weighted.jitter_m < 0.85 * unweighted.jitter_m

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -9,6 +10,7 @@ import cv2
 import numpy as np
 
 from tracking.anchors.dictionaries import aruco_dictionary
+from tracking.anchors.blur import MIN_MARKERS, fit_pose_and_stretch, marker_offsets, spread_enough
 from tracking.anchors.detect import ArucoDetection, Observation, detector_parameters
 from tracking.anchors.edges import edge_sharpness, refine_squares
 from tracking.anchors.filter import PoseFilter
@@ -83,6 +85,8 @@ class AnchorTracker:
     prediction (`_refit_covered`; the measurement then counts `refit_weight` in the filter and the result
     says `refitted`), and where that fails its measurement counts `cover_weight` and the result says
     `covered`.
+    unblur_px: when four or more markers spread over the image moved this many pixels since the last
+    frame, motion blur's stretch of the markers is fitted together with the pose (blur.py); None: never.
     new_anchor_gate: a frame's anchor never seen before in this session, detected while a reference
     pose exists (the caller's, else the filter's prediction, else the first declared anchor in view),
     is used only if its corners lie within `new_anchor_gate` times its own image size (pixels, the
@@ -94,7 +98,7 @@ class AnchorTracker:
                  full_every: int = 10, track_markers: bool = True, outlier_px: float = 3.0, branch_decay: float = 0.8,
                  branch_switch: float = 6.0, smear_px: float = 10.0, smear_sharpness: float = 0.15,
                  cover_fraction: float = 0.2, cover_weight: float = 0.1, refit_weight: float = 0.3,
-                 new_anchor_gate: float = 0.5,
+                 new_anchor_gate: float = 0.5, unblur_px: float | None = 2.0,
                  **filter_params):
         if not anchors:
             raise ValueError("AnchorTracker needs at least one anchor (the session's anchors list is empty)")
@@ -119,6 +123,7 @@ class AnchorTracker:
         self.track_markers = bool(track_markers)
         self.track_max_rms = 1.0  # px: a tracked (not detected) solution worse than this is re-detected
         self.deskew_extrapolate_min = 12  # points (three markers' corners): see _deskew
+        self.unblur_px = None if unblur_px is None else float(unblur_px)
         self._tracked_only = False
         self.outlier_px = float(outlier_px)
         self.branch_decay = float(branch_decay)
@@ -221,6 +226,8 @@ class AnchorTracker:
             alt = self._alternative
             sol = solve_pose(obs, self.world_from_anchor, self.camera, alt, outlier_px=self.outlier_px)
             self.filter.reset()
+        if sol is not None and self.unblur_px is not None:
+            sol = self._unstretch(obs, sol)
         self.frame += 1
         res = AnchorResult()
         if sol is not None:
@@ -258,6 +265,38 @@ class AnchorTracker:
         res.rejected = rejected
         res.ms = (time.perf_counter() - t0) * 1000.0
         return res
+
+    def _unstretch(self, obs: list[Observation], sol):
+        """The solution refitted together with motion blur's stretch of the markers (blur.py), when three or
+        more whole markers, spread in two directions, moved `unblur_px` pixels or more since the last
+        filtered pose; its image points are then the corners with the stretch taken out."""
+        groups = np.concatenate([ob.groups + 1_000_000 * (ob.anchor + 1) for ob in obs])[sol.inliers]
+        offsets, whole = marker_offsets(sol.img, groups)
+        if whole < MIN_MARKERS or not spread_enough(sol.img, groups):
+            return sol
+        if not self.filter.initialised:
+            return sol   # nothing says whether the markers move
+        moved = np.median(np.linalg.norm(self.camera.project_world(sol.world, sol.world_from_camera)
+                                         - self.camera.project_world(sol.world, self.filter.pose()), axis=1))
+        if moved < self.unblur_px:
+            return sol
+        cfw, S = fit_pose_and_stretch(self.camera, sol.camera_from_world, sol.world, sol.img, offsets)
+        # corners the stretch had made outliers fit now: solve again from all of them, stretch taken out
+        fixed = []
+        for ob in obs:
+            off, _ = marker_offsets(ob.img, ob.groups)
+            fixed.append(dataclasses.replace(ob, img=ob.img - off @ S.T))
+        again = solve_pose(fixed, self.world_from_anchor, self.camera, cfw, outlier_px=self.outlier_px)
+        if again is None:
+            return sol
+        groups = np.concatenate([ob.groups + 1_000_000 * (ob.anchor + 1) for ob in fixed])[again.inliers]
+        offsets, whole = marker_offsets(again.img, groups)
+        if whole < MIN_MARKERS or not spread_enough(again.img, groups):
+            return again
+        cfw, S2 = fit_pose_and_stretch(self.camera, again.camera_from_world, again.world, again.img, offsets)
+        img = again.img - offsets @ S2.T
+        rms = float(np.sqrt(np.mean(residuals(self.camera, cfw, again.world, img) ** 2)))
+        return dataclasses.replace(again, camera_from_world=cfw, img=img, rms=rms)
 
     def _deskew(self, obs: list[Observation], t: float) -> list[Observation]:
         """Move each detected point to where it would be at the frame's centre-row time, for a camera
