@@ -396,8 +396,10 @@ class AnchorTracker:
 
     def _drop_covered(self, gray: np.ndarray, obs: list[Observation], fast: bool = False,
                       pred_cfw: np.ndarray | None = None) -> tuple[list[Observation], set[int]]:
-        """Screen ArUco markers for a partly covered white margin (occlusion.covered_fraction). Covered
-        markers are dropped while uncovered markers remain in the frame; otherwise all are kept and
+        """Screen ArUco markers for a partly covered white margin (occlusion.covered_fraction). A covered
+        lone marker is first refitted on its edges from the prediction `pred_cfw` (_refit_covered; its
+        anchor is then in `_refit_now`). Markers still covered are dropped while uncovered markers remain
+        in the frame; otherwise all are kept and
         the anchors with covered markers are returned (their measurement is then down-weighted).
         Not while the camera moves fast (`fast`: blur lowers margins alike and is weighed separately),
         nor when more than `cover_max_markers` markers are in view (many markers outvote one marker's bad
