@@ -68,23 +68,39 @@ class PrinterSetupDialog(QDialog):
         self._test_task: Task | None = None
         self.last_result: cc.CheckResult | None = None
         form = QFormLayout()
+        self._add_printer_row(form)
+        self._add_bed_marker_row(form)
+        self._add_link_choice_row(form)
+        self._add_serial_section(form)
+        self._add_octoprint_section(form)
+        test_row = self._test_row()
+        buttons = self._button_box()
+        self._lay_out(form, test_row, buttons)
+        self._connect_signals(buttons)
+        self._start_from_saved_choice()
 
+    # -- building the dialog (top to bottom) -------------------------------------------------------
+    def _add_printer_row(self, form: QFormLayout) -> None:
+        """The Printer row: the presets, then "Profile file..." to pick a profile JSON."""
         self.profile = QComboBox()
         for key, data in PRESETS.items():
             self.profile.addItem(data["name"], f"preset:{key}")
         self.profile.addItem("Profile file...", "file")
-        self.profile.activated.connect(self._profile_activated)
+        form.addRow("Printer", self.profile)
+
+    def _add_bed_marker_row(self, form: QFormLayout) -> None:
+        """The chosen profile's summary and the Bed marker... button beside it."""
         self.profile_info = QLabel("")
         self.profile_info.setWordWrap(True)
-        form.addRow("Printer", self.profile)
         self.bed_anchor_button = QPushButton("Bed marker...")
         self.bed_anchor_button.setToolTip("Which marker lies on the bed and where (saved in the printer profile)")
-        self.bed_anchor_button.clicked.connect(self.edit_bed_anchor)
-        irow = QHBoxLayout()
-        irow.addWidget(self.profile_info, 1)
-        irow.addWidget(self.bed_anchor_button)
-        form.addRow("", irow)
+        row = QHBoxLayout()
+        row.addWidget(self.profile_info, 1)
+        row.addWidget(self.bed_anchor_button)
+        form.addRow("", row)
 
+    def _add_link_choice_row(self, form: QFormLayout) -> None:
+        """The Connection row: USB / serial (checked at first) or OctoPrint, one of the two."""
         self.serial_radio = QRadioButton("USB / serial")
         self.octo_radio = QRadioButton("OctoPrint")
         group = QButtonGroup(self)
@@ -97,53 +113,77 @@ class PrinterSetupDialog(QDialog):
         row.addStretch(1)
         form.addRow("Connection", row)
 
+    def _add_serial_section(self, form: QFormLayout) -> None:
+        """The serial fields (shown with USB / serial): the port with Refresh, and the baud rate."""
         self.serial_box = QWidget()
-        sf = QFormLayout(self.serial_box)
-        sf.setContentsMargins(0, 0, 0, 0)
-        self.port = QComboBox()
-        self.refresh_button = QPushButton("Refresh")
-        self.refresh_button.clicked.connect(self.refresh_ports)
-        prow = QHBoxLayout()
-        prow.addWidget(self.port, 1)
-        prow.addWidget(self.refresh_button)
-        sf.addRow("Port", prow)
+        fields = QFormLayout(self.serial_box)
+        fields.setContentsMargins(0, 0, 0, 0)
+        fields.addRow("Port", self._port_row())
         self.baud = QComboBox()
         for b in BAUDS:
             self.baud.addItem(str(b), b)
-        sf.addRow("Baud", self.baud)
+        fields.addRow("Baud", self.baud)
         form.addRow(self.serial_box)
 
+    def _port_row(self) -> QHBoxLayout:
+        """The port list (filled by refresh_ports) and its Refresh button."""
+        self.port = QComboBox()
+        self.refresh_button = QPushButton("Refresh")
+        row = QHBoxLayout()
+        row.addWidget(self.port, 1)
+        row.addWidget(self.refresh_button)
+        return row
+
+    def _add_octoprint_section(self, form: QFormLayout) -> None:
+        """The OctoPrint fields (shown with OctoPrint): the server's address and its API key (hidden text)."""
         self.octo_box = QWidget()
-        of = QFormLayout(self.octo_box)
-        of.setContentsMargins(0, 0, 0, 0)
+        fields = QFormLayout(self.octo_box)
+        fields.setContentsMargins(0, 0, 0, 0)
         self.url = QLineEdit()
         self.url.setPlaceholderText("http://octopi.local")
-        self.url.editingFinished.connect(self._url_changed)
         self.key = QLineEdit()
         self.key.setEchoMode(QLineEdit.EchoMode.Password)
         self.key.setPlaceholderText("paste the API key (OctoPrint: Settings > API)")
-        of.addRow("Address", self.url)
-        of.addRow("API key", self.key)
+        fields.addRow("Address", self.url)
+        fields.addRow("API key", self.key)
         form.addRow(self.octo_box)
 
+    def _test_row(self) -> QHBoxLayout:
+        """Test connection and, beside it, the test's result."""
         self.test_button = QPushButton("Test connection")
-        self.test_button.clicked.connect(self.test_connection)
         self.result = QLabel("")
         self.result.setWordWrap(True)
-        trow = QHBoxLayout()
-        trow.addWidget(self.test_button)
-        trow.addWidget(self.result, 1)
+        row = QHBoxLayout()
+        row.addWidget(self.test_button)
+        row.addWidget(self.result, 1)
+        return row
 
+    def _button_box(self) -> QDialogButtonBox:
+        """Save and Cancel; Save is kept as `save_button`."""
         buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Save | QDialogButtonBox.StandardButton.Cancel)
-        buttons.accepted.connect(self.save)
-        buttons.rejected.connect(self.reject)
         self.save_button = buttons.button(QDialogButtonBox.StandardButton.Save)
+        return buttons
+
+    def _lay_out(self, form: QFormLayout, test_row: QHBoxLayout, buttons: QDialogButtonBox) -> None:
+        """The form, then the test row, then Save / Cancel, top to bottom."""
         lay = QVBoxLayout(self)
         lay.addLayout(form)
-        lay.addLayout(trow)
+        lay.addLayout(test_row)
         lay.addWidget(buttons)
 
+    def _connect_signals(self, buttons: QDialogButtonBox) -> None:
+        """Widgets to handlers; made after the radios' first setChecked so that it does not count as a change."""
+        self.profile.activated.connect(self._profile_activated)
+        self.bed_anchor_button.clicked.connect(self.edit_bed_anchor)
+        self.refresh_button.clicked.connect(self.refresh_ports)
+        self.url.editingFinished.connect(self._url_changed)
+        self.test_button.clicked.connect(self.test_connection)
+        buttons.accepted.connect(self.save)
+        buttons.rejected.connect(self.reject)
         self.serial_radio.toggled.connect(self._link_changed)
+
+    def _start_from_saved_choice(self) -> None:
+        """List the ports, restore the remembered choice, and show the fields and summary that go with it."""
         self.refresh_ports()
         self._restore()
         self._link_changed()
