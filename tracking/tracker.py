@@ -89,6 +89,7 @@ class _Fit:
     visible: np.ndarray
     source: str | None = None
     out_pose: np.ndarray | None = None
+    precise: bool = False   # `out_pose` is the anchors' pose measured on 12+ corners
 
 
 def _has_content(gray) -> bool:
@@ -122,6 +123,10 @@ class TrackerConfig:
     """rad/s: the same for rotation."""
     blend_frames: int = 8
     """frames over which the step at a seam between pose sources (anchors / fused / map) is faded."""
+    precise_blend_frames: int = 4
+    """frames over which a seam is faded when the output switches to the anchors measured on 12 or more
+    corners (a board, a QR code, several markers; none partly covered): they are good to millimetres,
+    while what the output fades from (the map, flow) may have drifted by centimetres."""
     min_inliers: int = 20
     """map points a keypoint-only pose needs."""
     radius: float = 12.0
@@ -255,6 +260,7 @@ class Tracker:
         self.map = Map()
         self.mapper = LocalMapper(self.map, self.K, ba=ba, threaded=threaded) if slam else None
         self.blender = PoseBlender(blend_frames)
+        self.precise_blend_frames = max(1, int(cfg.precise_blend_frames))
         self.motion = MotionModel()
         self._reset_state()
 
@@ -410,7 +416,13 @@ class Tracker:
         # an empty map (nothing to match, no keyframe on its way) needs this frame's features only if the
         # anchors are found in it, to start the map: not extracted beside the detection then, but after it
         defer = need_feats and fut is not None and len(self.map.keyframes) == 0 and self.mapper.pending == 0
-        feats = self.extractor.extract(gray) if need_feats and not defer else Features.empty()
+        if need_feats and not defer and fut is None and self._fast_predicted(t):
+            # the worker is free and the flow will most likely be needed: features there, flow here
+            ffut = self._pool.submit(self.extractor.extract, gray)
+            self._follow_from_last(gray, t)   # kept for this frame
+            feats = ffut.result()
+        else:
+            feats = self.extractor.extract(gray) if need_feats and not defer else Features.empty()
         if fut is not None:
             if self._fast_predicted(t):
                 self._follow_from_last(gray, t)   # while the detection runs (the result is kept for this frame)
@@ -442,7 +454,8 @@ class Tracker:
         self._maybe_keyframe(t, fit.pose, feats, fit.point_ids, fit.feature_idx, corners_w, corners_uv, fit.state,
                              fit.points, fit.inliers)
         self._start_tracks(gray, feats, fit)
-        return self._finish(fit.pose, pred, fit.state, fit.source, fit.out_pose, markers, fit.inliers, t, t0)
+        return self._finish(fit.pose, pred, fit.state, fit.source, fit.out_pose, markers, fit.inliers, t, t0,
+                            precise=fit.precise)
 
     def _anchors_first(self, gray, t, t0):
         """Anchors were measured last frame: the anchor tracker re-finds them at their predicted place (no
@@ -475,7 +488,7 @@ class Tracker:
         # placed from the anchors' pose, as new seeds would be); without flow it restarts next time
         self._flow = None if got is None else relift(self.camera, got[1], pose)
         return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, int(ar.markers),
-                            int(ar.inliers), t, t0), ar
+                            int(ar.inliers), t, t0, precise=self._precise(ar)), ar
 
     def _without_fit(self, gray, t, t0, got, flow_tried, ar, pred, markers) -> TrackResult:
         """Neither anchors nor the map gave a pose: flow from the last frame, else the partly covered
@@ -535,18 +548,18 @@ class Tracker:
             # the map disagrees with the markers: trust the markers, the map gets corrected by BA
             p, cin, _ = refine_pose(self.K, anchor_pose, corners_w, corners_uv)
             min_ = np.zeros(pi.size, bool)
-        source, out_pose = None, None
+        source, out_pose, precise = None, None, False
         if (self.anchor_first and self._anchor_usable(ar)
                 and (self._lost > 0 or self._plausible(self._anchor_output(ar), self.motion.last, t))):
             # the anchors' pose is what is shown while they are in view (a jump the motion cannot
             # explain is left to the joint fit); the fit above places this frame in the map
-            source, out_pose = "anchors", self._anchor_output(ar)
+            source, out_pose, precise = "anchors", self._anchor_output(ar), self._precise(ar)
         elif min_.sum() < self.min_inliers and ar.world_from_camera is not None and len(corners_w) < 12:
             # the map does not help yet and one marker's pose is noisy: the anchors' filtered pose
             # (a board's many corners are precise as they are; its filter would only add lag)
             source, out_pose = "anchors", np.asarray(ar.world_from_camera, float)
         return _Fit(p, "marker", int(cin.sum() + min_.sum()), ids[pi[min_]], fi[min_], X[pi[min_]], ids[pi],
-                    source, out_pose)
+                    source, out_pose, precise)
 
     def _from_map(self, feats, pred, ids, X, D, t) -> _Fit | None:
         """No anchors: the pose from map points alone (from the motion's prediction, else by
@@ -567,14 +580,16 @@ class Tracker:
             return None
         return _Fit(p2, "slam", int(inl.sum()), ids[pi[inl]], fi[inl], X[pi[inl]], ids[pi])
 
-    def _finish(self, pose, pred, state, source, out_pose, markers, inliers, t, t0) -> TrackResult:
+    def _finish(self, pose, pred, state, source, out_pose, markers, inliers, t, t0, precise: bool = False) -> TrackResult:
+        """Close a tracked frame: `pose` (world_from_camera) goes to the motion model, `out_pose` (else
+        `pose`) is shown, faded at a change of `source` (over `precise_blend_frames` when `precise`)."""
         self._since_anchor = 0 if state == "marker" else self._since_anchor + 1
         if state == "marker":
             self._anchor_t = t
         anchored = state == "marker" or (self._anchored and self._since_anchor < self.marker_every)
         if source is None:
             source = "fused" if anchored else "map"
-        out = self._output(pose if out_pose is None else out_pose, pred, source)
+        out = self._output(pose if out_pose is None else out_pose, pred, source, precise)
         self._anchored = anchored
         self.motion.update(pose, t)
         self._lost = 0
@@ -725,6 +740,11 @@ class Tracker:
                 and len(ar.object_points) >= 4 and not ar.covered)
 
     @staticmethod
+    def _precise(ar) -> bool:
+        """The anchors' pose this frame rests on 12 or more corners, none partly covered (shown raw)."""
+        return ar is not None and not ar.covered and len(ar.object_points) >= 12
+
+    @staticmethod
     def _anchor_output(ar) -> np.ndarray:
         """The anchors' pose to show: a board's or QR code's many corners are precise as measured (the
         filter would only add lag on a moving camera); a lone marker's four are smoothed by its filter."""
@@ -803,15 +823,16 @@ class Tracker:
         self._kf_inliers = max(inliers, 1)
         self._anchor_kfs += state == "marker"
 
-    def _output(self, pose, pred, source: str) -> np.ndarray:
-        """Seamless output: fade the step when the source (anchors / fused / map) changes."""
+    def _output(self, pose, pred, source: str, precise: bool = False) -> np.ndarray:
+        """Seamless output: fade the step when the source (anchors / fused / map) changes; a switch to
+        precise anchors fades over `precise_blend_frames`."""
         changed = source != self._source
         self._source = source
         # after lost frames nothing was shown: the new pose is taken as it is, not faded from a stale one
         if self._last_out is not None and pred is not None and self._lost == 0 and changed:
             # where the output would have gone: the last output moved by the predicted camera motion
             target = self._last_out @ np.linalg.inv(self.motion.last) @ pred
-            self.blender.switch(pose, target)
+            self.blender.switch(pose, target, self.precise_blend_frames if precise else None)
         return self.blender.apply(pose)
 
     def _lost_frame(self, t0: float, markers: int) -> TrackResult:

@@ -68,6 +68,7 @@ class PoseBlender:
     def reset(self) -> None:
         self._offset0 = None
         self._k = 0
+        self._frames = self.frames
 
     @property
     def active(self) -> bool:
@@ -76,11 +77,12 @@ class PoseBlender:
     def current_offset(self) -> np.ndarray:
         if self._offset0 is None:
             return np.eye(4)
-        a = max(0.0, 1.0 - self._k / self.frames)
+        a = max(0.0, 1.0 - self._k / self._frames)
         return _exp(a * self._offset0)
 
-    def switch(self, estimate: np.ndarray, target: np.ndarray) -> None:
-        """Fade from `target` (where the output would have been) to `estimate`."""
+    def switch(self, estimate: np.ndarray, target: np.ndarray, frames: int | None = None) -> None:
+        """Fade from `target` (where the output would have been) to `estimate`, over `frames` frames
+        (default `self.frames`; fewer when the new estimate is known to be the better one)."""
         off = invert(estimate) @ target
         v = _log(off)
         if np.linalg.norm(v[3:]) > self.max_step_m or np.linalg.norm(v[:3]) > self.max_step_rad:
@@ -88,6 +90,7 @@ class PoseBlender:
             return
         self._offset0 = v
         self._k = 0
+        self._frames = self.frames if frames is None else max(1, int(frames))
 
     def apply(self, estimate: np.ndarray) -> np.ndarray:
         """The output pose for this frame's estimate; advances the fade by one frame."""
@@ -95,6 +98,6 @@ class PoseBlender:
             return estimate
         out = estimate @ self.current_offset()
         self._k += 1
-        if self._k >= self.frames:
+        if self._k >= self._frames:
             self.reset()
         return out

@@ -1,0 +1,160 @@
+"""The combined tracker under fast motion (tracking.tracker, tracking.slam.flow): the optical flow runs beside
+the anchors' measurement, flow points are followed on across frames the anchors carry, plane seeds are placed
+again from a new pose, no keypoints are extracted before there is a map to start, and the output settles on
+a board's measurement soon after a map-only stretch. References: cv2.projectPoints, the recordings' ground
+truth, the anchors-only tracker."""
+
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import tracking.tracker as tracker_module
+from scenes import load_recording, run_tracker
+from test_slam_flow import PLAIN, cv_project, look, texture, view  # noqa: F401  (texture: a fixture)
+from tracking.poses import make_pose
+from tracking.slam.features import FeatureExtractor
+from tracking.slam.flow import Tracks, relift, seed_on_plane
+from tracking.tracker import Tracker
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def recording(name, frames=None):
+    folder = ROOT / "recordings" / name
+    if not (folder / "groundtruth.tum").is_file():
+        pytest.fail(f"recordings/{name} with groundtruth.tum is part of the repository and must exist")
+    return load_recording(folder, frames)
+
+
+def test_relift_places_plane_seeds_from_a_new_pose_and_keeps_map_points(texture):  # noqa: F811
+    a = look([0.05, -0.25, 0.42])
+    b = a @ make_pose(np.eye(3), [0.004, -0.002, 0.003])   # the same pixels, seen from a slightly other pose
+    seeds = seed_on_plane(PLAIN, view(texture, a), a, n=200)
+    assert len(seeds) >= 150 and seeds.planar_mask().all()
+    mapped = np.array([[0.01, 0.02, 0.05], [-0.03, 0.01, 0.04]])   # two map points off the plane
+    tracks = Tracks(seeds.image, np.vstack([seeds.xy, cv_project(PLAIN, a, mapped)]).astype(np.float32),
+                    np.vstack([seeds.X, mapped]), planar=np.r_[seeds.planar_mask(), False, False])
+    moved = relift(PLAIN, tracks, b)
+    planar = moved.planar_mask()
+    assert planar.sum() >= 0.95 * len(seeds) and (~planar).sum() == 2
+    assert np.abs(moved.X[planar, 2]).max() < 1e-9                     # on the plane
+    # seen from b, the re-placed seeds project onto the pixels they were measured at
+    assert np.abs(cv_project(PLAIN, b, moved.X[planar]) - moved.xy[planar]).max() < 1e-3
+    assert np.allclose(moved.X[~planar], mapped)                      # map points are not moved
+
+
+def test_seed_top_up_keeps_away_from_the_points_kept(texture):  # noqa: F811
+    a = look([0.05, -0.25, 0.42])
+    img = view(texture, a)
+    first = seed_on_plane(PLAIN, img, a, n=120)
+    kept = Tracks(img, first.xy[:100], first.X[:100], planar=first.planar[:100])
+    topped = seed_on_plane(PLAIN, img, a, n=300, keep=kept)
+    assert len(topped) >= 250
+    assert np.array_equal(topped.xy[:100], kept.xy)
+    new = topped.xy[100:]
+    gaps = np.linalg.norm(new[:, None] - kept.xy[None], axis=2).min(axis=1)
+    assert gaps.min() >= 8.0   # min_distance 10 px, found on the half-resolution image (2 px grid)
+
+
+def _spy(monkeypatch, tr):
+    """Per frame: whether the anchors were measured off the main thread while the flow ran, and which
+    points the flow followed (in) and kept (out)."""
+    flow_started = threading.Event()
+    log = {"anchors": [], "follow": []}
+    process, follow = tr._anchors.process, tracker_module.follow
+
+    def anchors_process(*args, **kwargs):
+        off_main = threading.current_thread() is not threading.main_thread()
+        beside = off_main and flow_started.wait(0.3)   # the flow starts on the main thread meanwhile
+        log["anchors"].append((tr._frame, off_main, beside))
+        return process(*args, **kwargs)
+
+    def spy_follow(camera, tracks, *args, **kwargs):
+        flow_started.set()
+        got = follow(camera, tracks, *args, **kwargs)
+        log["follow"].append((tr._frame, tracks.xy.copy(), None if got is None else got[1].xy.copy()))
+        return got
+
+    monkeypatch.setattr(tr._anchors, "process", anchors_process)
+    monkeypatch.setattr(tracker_module, "follow", spy_follow)
+    return flow_started, log
+
+
+def test_flow_runs_beside_the_anchors_and_follows_on_across_marker_frames(monkeypatch):
+    """fast_motion: while the anchors carry the pose through fast motion, the flow that checks them for
+    smear runs while they are measured (OpenCV lets both threads work), on the points it followed into the
+    last frame."""
+    frames, session = recording("fast_motion")
+    states = []
+    with Tracker(session.camera, session.anchors, threaded=False) as tr:
+        flow_started, log = _spy(monkeypatch, tr)
+        for t, img, _ in frames:
+            flow_started.clear()
+            states.append(tr.process(img, t).state)
+    follows = {f: (xy_in, xy_out) for f, xy_in, xy_out in log["follow"]}
+    # frames (1-based, as Tracker counts) the anchors carried right after a frame they carried, with flow
+    fast_marker = [f for f in follows if states[f - 1] == "marker" and f >= 2 and states[f - 2] == "marker"]
+    assert len(fast_marker) >= 3
+    beside = {f for f, off_main, seen in log["anchors"] if off_main and seen}
+    # where the motion model already predicts the fast motion (not at a turnaround, where it lags)
+    assert len([f for f in fast_marker if f in beside]) >= max(2, len(fast_marker) // 2)
+    # on the marker frames after one with flow, the flow starts from the points it kept there
+    chained = [f for f in fast_marker if f - 1 in fast_marker and follows[f - 1][1] is not None]
+    assert len(chained) >= 2
+    for f in chained:
+        before, now = follows[f - 1][1], follows[f][0]
+        shared = (np.linalg.norm(now[:, None] - before[None], axis=2).min(axis=1) < 1e-3).sum()
+        assert shared >= 0.8 * len(before)
+
+
+def test_no_keypoints_before_the_anchors_are_first_seen(monkeypatch):
+    """fast_motion opens with frames where the marker is not yet readable: with no map to match against and
+    none to start, keypoints are not extracted there, only once the anchors are found."""
+    frames, session = recording("fast_motion", slice(0, 12))
+    calls = []
+    extract = FeatureExtractor.extract
+
+    def spy(self, gray):
+        calls.append(tr._frame)
+        return extract(self, gray)
+
+    monkeypatch.setattr(FeatureExtractor, "extract", spy)
+    with Tracker(session.camera, session.anchors, threaded=False) as tr:
+        states = [tr.process(img, t).state for t, img, _ in frames]
+    first = states.index("marker") + 1
+    assert first > 3 and all(s == "lost" for s in states[:first - 1])
+    assert calls and min(calls) == first
+
+
+@pytest.mark.parametrize("name", ["fast_motion", "tune_fast_pan"])
+def test_output_settles_on_a_board_soon_after_a_map_only_stretch(name):
+    """When a board (12+ corners) is measured again after frames carried by the map or flow, the output fades
+    from where it was over `precise_blend_frames` (4), not `blend_frames` (8): by the 4th frame after the
+    return it is as close to the truth as the anchors alone (the tracker with slam=False)."""
+    frames, session = recording(name)
+    with Tracker(session.camera, session.anchors, slam=False, filter=False) as tr:
+        alone = run_tracker(tr, frames)["errors"]
+    with Tracker(session.camera, session.anchors, threaded=False) as tr:
+        assert tr.config.precise_blend_frames == 4 and tr.config.blend_frames == 8
+        r = run_tracker(tr, frames)
+    st, err = r["states"], r["errors"]
+    k = 4
+    returns = [i for i in range(1, len(st) - k) if st[i - 1] == "slam" and all(s == "marker" for s in st[i:i + k + 1])]
+    assert returns
+    for i in returns:
+        assert err[i + k] <= alone[i + k] + 0.0015, (i, err[i:i + k + 1], alone[i:i + k + 1])
+
+
+def test_blender_fades_over_the_frames_a_switch_asks_for():
+    from tracking.slam.fusion import PoseBlender
+
+    bl = PoseBlender(frames=8)
+    est = look([0, -0.3, 0.4])
+    bl.switch(est, est @ make_pose(np.eye(3), [0.02, 0, 0]), frames=4)
+    steps = [np.linalg.norm(bl.apply(est)[:3, 3] - est[:3, 3]) for _ in range(5)]
+    assert np.allclose(steps, [0.02, 0.015, 0.01, 0.005, 0.0], atol=1e-9)
+    bl.switch(est, est @ make_pose(np.eye(3), [0.02, 0, 0]))   # the default stays blend_frames
+    steps = [np.linalg.norm(bl.apply(est)[:3, 3] - est[:3, 3]) for _ in range(9)]
+    assert np.allclose(steps[::2], [0.02, 0.015, 0.01, 0.005, 0.0], atol=1e-9)
