@@ -20,8 +20,16 @@ prediction; the pose is a robust joint fit of marker corners and map points
 (anchors dominate), or of map points alone, or comes from relocalisation. When
 all of that fails on a frame that follows a tracked one (motion blur smears
 markers and descriptors alike), keypoints are followed from the last frame by
-optical flow (`tracking.slam.flow`) and carry the pose. New keyframes go to the
-mapping thread (triangulation, culling, local bundle adjustment with anchor
+optical flow (`tracking.slam.flow`) and carry the pose. Under fast motion the flow
+also checks the anchors for smear; when the motion model predicts it, it runs on
+this thread while the anchors are measured on the worker (OpenCV releases the
+interpreter; the results are those of running one after the other), and its
+points are followed on from frame to frame while the anchors carry the pose
+(plane seeds placed again from the anchors' pose) instead of being seeded anew.
+When a board (12+ corners) returns after frames carried by the map or flow, the
+output fades onto it over `precise_blend_frames`, fewer than other seams take.
+New keyframes go to
+the mapping thread (triangulation, culling, local bundle adjustment with anchor
 corners as constraints); `process` never waits for it. Offline drivers, which
 feed frames faster than a camera would, call `catch_up()` between frames so the
 map keeps the pace it would have live, whatever the machine's load.
