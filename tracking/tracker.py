@@ -588,7 +588,8 @@ class Tracker:
             return None
         return _Fit(p2, "slam", int(inl.sum()), ids[pi[inl]], fi[inl], X[pi[inl]], ids[pi])
 
-    def _finish(self, pose, pred, state, source, out_pose, markers, inliers, t, t0, precise: bool = False) -> TrackResult:
+    def _finish(self, pose, pred, state, source, out_pose, markers, inliers, t, t0,
+                precise: bool = False) -> TrackResult:
         """Close a tracked frame: `pose` (world_from_camera) goes to the motion model, `out_pose` (else
         `pose`) is shown, faded at a change of `source` (over `precise_blend_frames` when `precise`)."""
         self._since_anchor = 0 if state == "marker" else self._since_anchor + 1

@@ -108,7 +108,8 @@ def _corners(gray: np.ndarray, n: int, min_distance: int, taken: np.ndarray) -> 
         ij = ij[(ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < img.shape[1]) & (ij[:, 1] < img.shape[0])]
         mask[ij[:, 1], ij[:, 0]] = 255
         mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1)))
-    got = cv2.goodFeaturesToTrack(img, n, SEED_QUALITY, min_distance / scale, mask=255 - mask, blockSize=3 if half else 5)
+    got = cv2.goodFeaturesToTrack(img, n, SEED_QUALITY, min_distance / scale, mask=255 - mask,
+                                  blockSize=3 if half else 5)
     # pyrDown keeps the even rows and columns: half-resolution pixel (x, y) is full pixel (2x, 2y)
     return np.zeros((0, 2), np.float32) if got is None else (scale * got.reshape(-1, 2)).astype(np.float32)
 
