@@ -131,13 +131,14 @@ def test_no_keypoints_before_the_anchors_are_first_seen(monkeypatch):
 @pytest.mark.parametrize("name", ["fast_motion", "tune_fast_pan"])
 def test_output_settles_on_a_board_soon_after_a_map_only_stretch(name):
     """When a board (12+ corners) is measured again after frames carried by the map or flow, the output fades
-    from where it was over `precise_blend_frames` (4), not `blend_frames` (8): by the 4th frame after the
-    return it is as close to the truth as the anchors alone (the tracker with slam=False)."""
+    from where it was over `precise_blend_frames` (5, starting on the return frame), not `blend_frames` (8):
+    by the 4th frame after the return it is as close to the truth as the anchors alone (the tracker with
+    slam=False)."""
     frames, session = recording(name)
     with Tracker(session.camera, session.anchors, slam=False, filter=False) as tr:
         alone = run_tracker(tr, frames)["errors"]
     with Tracker(session.camera, session.anchors, threaded=False) as tr:
-        assert tr.config.precise_blend_frames == 4 and tr.config.blend_frames == 8
+        assert tr.config.precise_blend_frames == 5 and tr.config.blend_frames == 8
         r = run_tracker(tr, frames)
     st, err = r["states"], r["errors"]
     k = 4
@@ -155,6 +156,9 @@ def test_blender_fades_over_the_frames_a_switch_asks_for():
     bl.switch(est, est @ make_pose(np.eye(3), [0.02, 0, 0]), frames=4)
     steps = [np.linalg.norm(bl.apply(est)[:3, 3] - est[:3, 3]) for _ in range(5)]
     assert np.allclose(steps, [0.02, 0.015, 0.01, 0.005, 0.0], atol=1e-9)
+    bl.switch(est, est @ make_pose(np.eye(3), [0.02, 0, 0]), frames=4, at_once=True)   # the first step now
+    steps = [np.linalg.norm(bl.apply(est)[:3, 3] - est[:3, 3]) for _ in range(4)]
+    assert np.allclose(steps, [0.015, 0.01, 0.005, 0.0], atol=1e-9)
     bl.switch(est, est @ make_pose(np.eye(3), [0.02, 0, 0]))   # the default stays blend_frames
     steps = [np.linalg.norm(bl.apply(est)[:3, 3] - est[:3, 3]) for _ in range(9)]
     assert np.allclose(steps[::2], [0.02, 0.015, 0.01, 0.005, 0.0], atol=1e-9)

@@ -131,10 +131,11 @@ class TrackerConfig:
     """rad/s: the same for rotation."""
     blend_frames: int = 8
     """frames over which the step at a seam between pose sources (anchors / fused / map) is faded."""
-    precise_blend_frames: int = 4
+    precise_blend_frames: int = 5
     """frames over which a seam is faded when the output switches to the anchors measured on 12 or more
-    corners (a board, a QR code, several markers; none partly covered): they are good to millimetres,
-    while what the output fades from (the map, flow) may have drifted by centimetres."""
+    corners (a board, a QR code, several markers; none partly covered), the first step taken on the switch
+    frame itself: they are good to millimetres, while what the output fades from (the map, flow) may have
+    drifted by centimetres."""
     min_inliers: int = 20
     """map points a keypoint-only pose needs."""
     radius: float = 12.0
@@ -841,7 +842,8 @@ class Tracker:
         if self._last_out is not None and pred is not None and self._lost == 0 and changed:
             # where the output would have gone: the last output moved by the predicted camera motion
             target = self._last_out @ np.linalg.inv(self.motion.last) @ pred
-            self.blender.switch(pose, target, self.precise_blend_frames if precise else None)
+            # onto precise anchors the fade starts on this very frame: they are the better pose
+            self.blender.switch(pose, target, self.precise_blend_frames if precise else None, at_once=precise)
         return self.blender.apply(pose)
 
     def _lost_frame(self, t0: float, markers: int) -> TrackResult:

@@ -80,17 +80,21 @@ class PoseBlender:
         a = max(0.0, 1.0 - self._k / self._frames)
         return _exp(a * self._offset0)
 
-    def switch(self, estimate: np.ndarray, target: np.ndarray, frames: int | None = None) -> None:
+    def switch(self, estimate: np.ndarray, target: np.ndarray, frames: int | None = None,
+               at_once: bool = False) -> None:
         """Fade from `target` (where the output would have been) to `estimate`, over `frames` frames
-        (default `self.frames`; fewer when the new estimate is known to be the better one)."""
+        (default `self.frames`; fewer when the new estimate is known to be the better one). `at_once`: this
+        frame's output already takes the first step (else it is `target` itself)."""
         off = invert(estimate) @ target
         v = _log(off)
         if np.linalg.norm(v[3:]) > self.max_step_m or np.linalg.norm(v[:3]) > self.max_step_rad:
             self.reset()
             return
         self._offset0 = v
-        self._k = 0
         self._frames = self.frames if frames is None else max(1, int(frames))
+        self._k = 1 if at_once else 0
+        if self._k >= self._frames:
+            self.reset()
 
     def apply(self, estimate: np.ndarray) -> np.ndarray:
         """The output pose for this frame's estimate; advances the fade by one frame."""
