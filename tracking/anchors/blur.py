@@ -9,7 +9,7 @@ centimetres. The stretch is the same kind for every marker of a frame (one
 motion, one exposure): each marker's corners move by S (corner - marker
 centre), with S a symmetric 2x2 image-space tensor. Perspective cannot mimic
 that on several markers at once (it also changes the spacing between
-markers), so with three or more whole markers S and the pose can be fitted
+markers), so with five or more whole markers, spread over the image, S and the pose can be fitted
 together: six pose parameters plus three of S, by Gauss-Newton on the
 reprojection error.
 """
@@ -21,7 +21,7 @@ import numpy as np
 
 from tracking.camera import Camera
 
-MIN_MARKERS = 4   # whole markers (4 inlier corners each) needed to tell the stretch from the pose
+MIN_MARKERS = 5   # whole markers (4 inlier corners each) needed: with 3-4 at an image edge the fit went wrong
 MIN_SPREAD = 0.4  # marker sizes: see spread_enough
 PRIOR = 0.03      # standard deviation of the stretch's prior (a 2 px stretch of a 60 px marker is 0.03)
 

@@ -85,7 +85,7 @@ class AnchorTracker:
     prediction (`_refit_covered`; the measurement then counts `refit_weight` in the filter and the result
     says `refitted`), and where that fails its measurement counts `cover_weight` and the result says
     `covered`.
-    unblur_px: when four or more markers spread over the image moved this many pixels since the last
+    unblur_px: when five or more markers spread over the image moved this many pixels since the last
     frame, motion blur's stretch of the markers is fitted together with the pose (blur.py); None: never.
     new_anchor_gate: a frame's anchor never seen before in this session, detected while a reference
     pose exists (the caller's, else the filter's prediction, else the first declared anchor in view),
@@ -267,7 +267,7 @@ class AnchorTracker:
         return res
 
     def _unstretch(self, obs: list[Observation], sol):
-        """The solution refitted together with motion blur's stretch of the markers (blur.py), when three or
+        """The solution refitted together with motion blur's stretch of the markers (blur.py), when five or
         more whole markers, spread in two directions, moved `unblur_px` pixels or more since the last
         filtered pose; its image points are then the corners with the stretch taken out."""
         groups = np.concatenate([ob.groups + 1_000_000 * (ob.anchor + 1) for ob in obs])[sol.inliers]
