@@ -162,3 +162,25 @@ def test_blender_fades_over_the_frames_a_switch_asks_for():
     bl.switch(est, est @ make_pose(np.eye(3), [0.02, 0, 0]))   # the default stays blend_frames
     steps = [np.linalg.norm(bl.apply(est)[:3, 3] - est[:3, 3]) for _ in range(9)]
     assert np.allclose(steps[::2], [0.02, 0.015, 0.01, 0.005, 0.0], atol=1e-9)
+
+
+def test_poses_do_not_depend_on_how_long_the_anchors_take(monkeypatch):
+    """The flow started beside the anchors' measurement is only ever used where it would have been computed
+    after it: with mapping inline (threaded=False) a slow anchors thread changes no pose."""
+    import time
+
+    frames, session = recording("fast_motion", slice(0, 36))
+    runs = []
+    for delay in (0.0, 0.015):
+        with Tracker(session.camera, session.anchors, threaded=False) as tr:
+            process = tr._anchors.process
+
+            def slow(*args, delay=delay, **kwargs):
+                time.sleep(delay)
+                return process(*args, **kwargs)
+
+            monkeypatch.setattr(tr._anchors, "process", slow)
+            runs.append([tr.process(img, t).world_from_camera for t, img, _ in frames])
+    assert sum(p is not None for p in runs[0]) >= 25
+    for a, b in zip(*runs):
+        assert (a is None) == (b is None) and (a is None or np.array_equal(a, b))
