@@ -219,7 +219,7 @@ def test_ambiguous_marker_stays_on_its_branch(cam):
         wrong = []
         for k in range(60):
             ob = Observation(0, obj, clean + rng.normal(0, 0.45, clean.shape), np.full(4, 20), 1, square=True)
-            tr._detect_aruco = lambda gray, pred, ob=ob: [ob]
+            tr._detect_aruco = lambda gray, pred, fast=False, ob=ob: [ob]
             res = tr.process(blank, k / 30)
             sols = [invert(s) for s in planar_solutions(ob, cam)]
             e = sorted((rot_err_deg(s, gt), i) for i, s in enumerate(sols))

@@ -26,37 +26,37 @@ MIN_SPREAD = 0.4  # marker sizes: see spread_enough
 PRIOR = 0.03      # standard deviation of the stretch's prior (a 2 px stretch of a 60 px marker is 0.03)
 
 
+def _markers(img: np.ndarray, groups: np.ndarray):
+    """Per point: the index of its group and whether that group has exactly 4 points (a whole marker);
+    per group: its point count and the mean of its points."""
+    uniq, inv, counts = np.unique(groups, return_inverse=True, return_counts=True)
+    sums = np.zeros((len(uniq), 2))
+    np.add.at(sums, inv, img)
+    return inv, counts[inv] == 4, counts, sums / counts[:, None]
+
+
 def marker_offsets(img: np.ndarray, groups: np.ndarray) -> tuple[np.ndarray, int]:
     """Each point's offset (N,2) pixels from the centre of its marker's corners (zeros for points not in a
     group of exactly 4: QR or chessboard points, or markers with a corner dropped), and the number of
     whole markers."""
     img = np.asarray(img, float).reshape(-1, 2)
-    out = np.zeros_like(img)
-    whole = 0
-    for g in np.unique(groups):
-        sel = groups == g
-        if sel.sum() == 4:
-            out[sel] = img[sel] - img[sel].mean(axis=0)
-            whole += 1
-    return out, whole
+    inv, whole, counts, centres = _markers(img, groups)
+    return np.where(whole[:, None], img - centres[inv], 0.0), int((counts == 4).sum())
 
 
 def spread_enough(img: np.ndarray, groups: np.ndarray, min_spread: float = MIN_SPREAD) -> bool:
-    """Whether the whole markers (groups of 4 points) lie spread in two directions: the smaller principal
-    standard deviation of their centres is at least `min_spread` marker sizes. A row or column of markers
-    (a board half out of view) cannot tell a stretch across it from the pose's tilt."""
+    """Whether at least MIN_MARKERS whole markers (groups of 4 points) lie spread in two directions: the
+    smaller principal standard deviation of their centres is at least `min_spread` marker sizes. A row
+    or column of markers (a board half out of view) cannot tell a stretch across it from the pose's tilt."""
     img = np.asarray(img, float).reshape(-1, 2)
-    centres, sizes = [], []
-    for g in np.unique(groups):
-        sel = groups == g
-        if sel.sum() == 4:
-            q = img[sel]
-            centres.append(q.mean(axis=0))
-            a, b = q[2] - q[0], q[3] - q[1]
-            sizes.append(np.sqrt(abs(a[0] * b[1] - a[1] * b[0]) / 2))   # area from the diagonals
-    if len(centres) < MIN_MARKERS:
+    inv, whole, counts, centres = _markers(img, groups)
+    if (counts == 4).sum() < MIN_MARKERS:
         return False
-    minor = np.sqrt(max(np.linalg.eigvalsh(np.cov(np.array(centres).T))[0], 0.0))
+    # a square's corners lie side / sqrt(2) from its centre
+    r2 = np.zeros(len(counts))
+    np.add.at(r2, inv, ((img - centres[inv]) ** 2).sum(axis=1))
+    sizes = np.sqrt(2.0 * r2[counts == 4] / 4.0)
+    minor = np.sqrt(max(np.linalg.eigvalsh(np.cov(centres[counts == 4].T))[0], 0.0))
     return bool(minor >= min_spread * float(np.median(sizes)))
 
 

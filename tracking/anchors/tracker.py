@@ -204,11 +204,11 @@ class AnchorTracker:
         pred = self.filter.predict(t)
         pred_cfw = None if pred is None else invert(pred)
         self._tracked_only = False
-        aruco_obs = self._detect_aruco(gray, pred_cfw)
+        fast = self._moving_fast(pred_cfw)
+        aruco_obs = self._detect_aruco(gray, pred_cfw, fast)
         qr_obs = self.qr.process(gray, pred_cfw, self._expected_qr(pred_cfw)) if self.qr.models else []
         ref_cfw = invert(reference) if reference is not None else pred_cfw
         obs, rejected = self._screen_new(aruco_obs + qr_obs, ref_cfw)
-        fast = self._moving_fast(pred_cfw)
         obs, covered = self._drop_covered(gray, obs, fast, pred_cfw)
         obs = self._deskew(obs, t)
         sol = solve_pose(obs, self.world_from_anchor, self.camera, pred_cfw, outlier_px=self.outlier_px)
@@ -281,22 +281,9 @@ class AnchorTracker:
         if moved < self.unblur_px:
             return sol
         cfw, S = fit_pose_and_stretch(self.camera, sol.camera_from_world, sol.world, sol.img, offsets)
-        # corners the stretch had made outliers fit now: solve again from all of them, stretch taken out
-        fixed = []
-        for ob in obs:
-            off, _ = marker_offsets(ob.img, ob.groups)
-            fixed.append(dataclasses.replace(ob, img=ob.img - off @ S.T))
-        again = solve_pose(fixed, self.world_from_anchor, self.camera, cfw, outlier_px=self.outlier_px)
-        if again is None:
-            return sol
-        groups = np.concatenate([ob.groups + 1_000_000 * (ob.anchor + 1) for ob in fixed])[again.inliers]
-        offsets, whole = marker_offsets(again.img, groups)
-        if whole < MIN_MARKERS or not spread_enough(again.img, groups):
-            return again
-        cfw, S2 = fit_pose_and_stretch(self.camera, again.camera_from_world, again.world, again.img, offsets)
-        img = again.img - offsets @ S2.T
-        rms = float(np.sqrt(np.mean(residuals(self.camera, cfw, again.world, img) ** 2)))
-        return dataclasses.replace(again, camera_from_world=cfw, img=img, rms=rms)
+        img = sol.img - offsets @ S.T
+        rms = float(np.sqrt(np.mean(residuals(self.camera, cfw, sol.world, img) ** 2)))
+        return dataclasses.replace(sol, camera_from_world=cfw, img=img, rms=rms)
 
     def _deskew(self, obs: list[Observation], t: float) -> list[Observation]:
         """Move each detected point to where it would be at the frame's centre-row time, for a camera
@@ -472,10 +459,14 @@ class AnchorTracker:
             return None
         return refined
 
-    def _detect_aruco(self, gray: np.ndarray, pred_cfw: np.ndarray | None) -> list[Observation]:
+    def _detect_aruco(self, gray: np.ndarray, pred_cfw: np.ndarray | None, fast: bool = False) -> list[Observation]:
+        """The ArUco anchors' observations: re-found on their edges where `pred_cfw` puts them, else detected
+        in a region around that, else in the whole frame. Not re-found while the camera moves `fast`
+        (a prediction off by more than half a cell, as it is then, never re-finds them: time lost)."""
         if not self.aruco.models:
             return []
-        if self.track_markers and pred_cfw is not None and self.frame % self.full_every and self.tracked_keys:
+        if (self.track_markers and not fast and pred_cfw is not None and self.frame % self.full_every
+                and self.tracked_keys):
             # between detections: the markers of the last frame, re-found on their edges where the
             # predicted pose puts them (no detector pass at all)
             obs = self.aruco.track(gray, self.tracked_keys, pred_cfw)
