@@ -175,6 +175,11 @@ class TrackerConfig:
     used, for at most `smear_hold_s` since the anchors were last accepted."""
     smear_sharpness: float = 0.15
     """`anchors.edges.edge_sharpness` below which edges count as smeared (about 1/pixels of smear)."""
+    start_sharpness: float = 0.2
+    """when nothing holds the pose (the first sighting, or after a loss), anchors whose edges are softer
+    than this across x or y (`anchors.edges.edge_sharpness`: about 1/pixels of motion smear) do not start
+    it: a board caught mid-pan with a few smeared markers reads centimetres off, and the next frames (or
+    the map) start it better. 0 turns the check off."""
     smear_gate_px: float = 1.0
     """pixels: median gap between flow-projected and detected marker corners that distrusts the markers."""
     smear_hold_s: float = 0.5
@@ -255,6 +260,7 @@ class Tracker:
         self.smear_gate_px, self.smear_hold_s = smear_gate_px, smear_hold_s
         self.flow_hold_s = flow_hold_s
         self.jump_px = cfg.jump_px
+        self.start_sharpness = cfg.start_sharpness
         self.anchor_first = bool(anchor_first)
         self.keypoint_every = max(1, int(keypoint_every))
         self._kf_submissions: list[tuple[int, int]] = []   # (frame, mapper request number)
@@ -451,6 +457,8 @@ class Tracker:
                     return self._flow_result(got, t, t0, int(ar.markers))
 
         corners_w, corners_uv, markers = self._anchor_points(ar)
+        if len(corners_w) and (self._lost > 0 or self.motion.last is None) and self._too_smeared_to_start(ar, gray):
+            corners_w, corners_uv = corners_w[:0], corners_uv[:0]   # the map may still relocalise
         pred = self.motion.predict(t)
         ids, X, D = self.map.arrays()
         if len(corners_w):
@@ -669,6 +677,15 @@ class Tracker:
         corners = np.asarray(ar.object_points, float).reshape(-1, 3)
         gap = float(np.median(np.linalg.norm(self.camera.project_world(corners, got[0]) - seen, axis=1)))
         return gap > self.smear_gate_px
+
+    def _too_smeared_to_start(self, ar, gray) -> bool:
+        """Whether the anchors' edges are too soft across x or y (`start_sharpness`) to start the pose from
+        them alone. Nothing says which way the camera moves yet, so both directions are measured."""
+        if self.start_sharpness <= 0:
+            return False
+        seen = np.asarray(ar.image_points, float).reshape(-1, 2)
+        sharp = [edge_sharpness(gray, seen, np.array(d)) for d in ((1.0, 0.0), (0.0, 1.0))]
+        return bool(min(sharp) < self.start_sharpness)   # NaN (unmeasurable) compares False: start
 
     def _jumped(self, ar, t) -> bool:
         """Whether a corner of a lone marker (4 points: one wrong corner does not show in its reprojection
