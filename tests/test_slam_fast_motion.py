@@ -122,10 +122,13 @@ def test_no_keypoints_before_the_anchors_are_first_seen(monkeypatch):
 
     monkeypatch.setattr(FeatureExtractor, "extract", spy)
     with Tracker(session.camera, session.anchors, threaded=False) as tr:
-        states = [tr.process(img, t).state for t, img, _ in frames]
+        results = [tr.process(img, t) for t, img, _ in frames]
+    states = [r.state for r in results]
     first = states.index("marker") + 1
+    found = next(i for i, r in enumerate(results) if r.markers > 0) + 1   # (frame numbers count from 1)
     assert first > 3 and all(s == "lost" for s in states[:first - 1])
-    assert calls and min(calls) == first
+    # from the first frame the anchors are found on (a smeared one does not start the pose: start_sharpness)
+    assert calls and found <= min(calls) <= first
 
 
 @pytest.mark.parametrize("name", ["fast_motion", "tune_fast_pan"])
