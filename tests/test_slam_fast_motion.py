@@ -167,6 +167,23 @@ def test_blender_fades_over_the_frames_a_switch_asks_for():
     assert np.allclose(steps[::2], [0.02, 0.015, 0.01, 0.005, 0.0], atol=1e-9)
 
 
+def test_blender_hurries_a_long_fade_from_where_it_is():
+    """A board coming back mid-fade (a lone marker carried the output, the fade from the map still running):
+    the rest of the fade takes `frames` frames from the offset reached, without a jump."""
+    from tracking.slam.fusion import PoseBlender
+
+    bl = PoseBlender(frames=8)
+    est = look([0, -0.3, 0.4])
+    bl.switch(est, est @ make_pose(np.eye(3), [0.04, 0, 0]))
+    first = [np.linalg.norm(bl.apply(est)[:3, 3] - est[:3, 3]) for _ in range(2)]   # 40, 35 mm
+    bl.hurry(3)
+    rest = [np.linalg.norm(bl.apply(est)[:3, 3] - est[:3, 3]) for _ in range(4)]
+    assert np.allclose(first + rest, [0.04, 0.035, 0.02, 0.01, 0.0, 0.0], atol=1e-9)
+    bl.switch(est, est @ make_pose(np.eye(3), [0.04, 0, 0]), frames=2)
+    bl.hurry(3)   # already shorter: unchanged
+    assert np.allclose([np.linalg.norm(bl.apply(est)[:3, 3] - est[:3, 3]) for _ in range(3)], [0.04, 0.02, 0.0])
+
+
 def test_poses_do_not_depend_on_how_long_the_anchors_take(monkeypatch):
     """The flow started beside the anchors' measurement is only ever used where it would have been computed
     after it: with mapping inline (threaded=False) a slow anchors thread changes no pose."""

@@ -852,7 +852,7 @@ class Tracker:
 
     def _output(self, pose, pred, source: str, precise: bool = False) -> np.ndarray:
         """Seamless output: fade the step when the source (anchors / fused / map) changes; a switch to
-        precise anchors fades over `precise_blend_frames`."""
+        precise anchors, or precise anchors arriving during a fade, fades over `precise_blend_frames`."""
         changed = source != self._source
         self._source = source
         # after lost frames nothing was shown: the new pose is taken as it is, not faded from a stale one
@@ -861,6 +861,10 @@ class Tracker:
             target = self._last_out @ np.linalg.inv(self.motion.last) @ pred
             # onto precise anchors the fade starts on this very frame: they are the better pose
             self.blender.switch(pose, target, self.precise_blend_frames if precise else None, at_once=precise)
+        elif precise:
+            # the same source turned precise mid-fade (a board coming back into view after a lone marker
+            # carried it): no reason left to keep showing the old offset for long
+            self.blender.hurry(self.precise_blend_frames)
         return self.blender.apply(pose)
 
     def _lost_frame(self, t0: float, markers: int) -> TrackResult:

@@ -96,6 +96,17 @@ class PoseBlender:
         if self._k >= self._frames:
             self.reset()
 
+    def hurry(self, frames: int) -> None:
+        """An active fade that has more than `frames` frames to go finishes within `frames` instead, from
+        the offset it has reached (this frame's output takes the first of those steps)."""
+        if self._offset0 is None or self._frames - self._k <= frames:
+            return
+        self._offset0 = max(0.0, 1.0 - self._k / self._frames) * self._offset0
+        self._frames = max(1, int(frames))
+        self._k = 1
+        if self._k >= self._frames:
+            self.reset()
+
     def apply(self, estimate: np.ndarray) -> np.ndarray:
         """The output pose for this frame's estimate; advances the fade by one frame."""
         if self._offset0 is None:
