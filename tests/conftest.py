@@ -23,3 +23,15 @@ def config_dir(tmp_path, monkeypatch) -> Path:
     d = tmp_path / "config"
     monkeypatch.setenv("ARAPP_CONFIG_DIR", str(d))
     return d
+
+
+@pytest.fixture()
+def threads_window(qtbot, tmp_path, config_dir, monkeypatch):
+    """The main window, shown, with the in-process engine (ARAPP_GUI_ENGINE=threads) and its own config."""
+    from gui_helpers import close_main_window, open_main_window
+
+    monkeypatch.setenv("ARAPP_GUI_ENGINE", "threads")
+    w = open_main_window(qtbot, tmp_path)
+    w.show()
+    yield w
+    close_main_window(w)

@@ -34,6 +34,20 @@ def scene_dict(name: str, keys: list[dict], fps: float = 30.0, width: int = 640,
     }
 
 
+# A 5x3 GridBoard of 32 mm DICT_4X4_50 markers (ids 0-14), 8 mm apart: the kind of board fast pans are tracked on.
+BOARD_5X3 = {"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 5, "markers_y": 3,
+             "marker_length": 0.032, "separation": 0.008, "first_id": 0}
+
+
+def board_scene_dict(name: str, keys: list[dict], seed: int, **effects) -> dict:
+    """scene_dict with the 5x3 board (BOARD_5X3) as the anchor, sensor noise 1.0 and `effects` added
+    (e.g. motion_blur=0.6, blur_samples=7)."""
+    sj = scene_dict(name, keys, noise=1.0, seed=seed)
+    sj["anchors"] = [dict(BOARD_5X3)]
+    sj["effects"].update(effects)
+    return sj
+
+
 def away_and_back_keys(away_s: float = 5.0, height: float = 0.42) -> list[dict]:
     """Look at the marker while moving (parallax for the map), pan away so the marker leaves the
     view for `away_s` seconds, wander there, come back."""
@@ -137,3 +151,15 @@ def load_recording(folder, frames: slice | None = None):
                 j = int(np.argmin(np.abs(gt_t - frame.t)))
                 out.append((float(frame.t), frame.image, gt[j]))
     return out, session
+
+
+def bundled_recording(name: str, frames: slice | None = None):
+    """`load_recording` of recordings/NAME in this repository; fails the test (not skips) when missing."""
+    from pathlib import Path
+
+    import pytest
+
+    folder = Path(__file__).resolve().parents[1] / "recordings" / name
+    if not (folder / "groundtruth.tum").is_file():
+        pytest.fail(f"recordings/{name} with groundtruth.tum is part of the repository and must exist")
+    return load_recording(folder, frames)

@@ -11,7 +11,7 @@ import pytest
 from tracking.anchors import AnchorTracker
 from tracking.anchors.blur import fit_pose_and_stretch, marker_offsets, spread_enough
 from tracking.camera import Camera
-from scenes import render_sequence
+from scenes import board_scene_dict, render_sequence
 
 CAM = Camera(K=np.array([[560.0, 0, 322.0], [0, 560.0, 236.0], [0, 0, 1]]), dist=np.array([-0.08, 0.04, 0, 0, 0]),
              width=640, height=480)
@@ -84,13 +84,7 @@ def panning_board():
     keys = [{"t": 0.0, "eye": [-0.02, -0.26, 0.42], "target": [0.02, 0.05, 0.0]},
             {"t": 0.5, "eye": [0.06, -0.25, 0.42], "target": [0.12, 0.06, 0.0]},
             {"t": 1.0, "eye": [0.0, -0.26, 0.42], "target": [0.02, 0.05, 0.0]}]
-    sj = {"name": "pan_blur", "seed": 21, "fps": 30, "duration": 1.0,
-          "camera": {"width": 640, "height": 480, "hfov_deg": 62},
-          "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 5, "markers_y": 3,
-                       "marker_length": 0.032, "separation": 0.008, "first_id": 0}],
-          "desk": {"size": [1.6, 1.2], "ppm": 1500, "seed": 21},
-          "trajectory": {"kind": "keyframes", "keys": keys},
-          "effects": {"noise": 1.0, "motion_blur": 0.6, "blur_samples": 7}, "supersample": 1}
+    sj = board_scene_dict("pan_blur", keys, seed=21, motion_blur=0.6, blur_samples=7)
     return render_sequence(sj)
 
 

@@ -7,17 +7,13 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from gui_helpers import TIMEOUT_MS, close_main_window, open_main_window
+from gui_helpers import TIMEOUT_MS
 
 
 
 @pytest.fixture()
-def window(qtbot, tmp_path, config_dir, monkeypatch):
-    monkeypatch.setenv("ARAPP_GUI_ENGINE", "threads")
-    w = open_main_window(qtbot, tmp_path)
-    w.show()
-    yield w
-    close_main_window(w)
+def window(threads_window):
+    return threads_window
 
 
 @pytest.fixture()

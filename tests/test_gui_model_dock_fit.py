@@ -10,19 +10,15 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from gui_helpers import TIMEOUT_MS, close_main_window, open_main_window
+from gui_helpers import TIMEOUT_MS
 from PySide6.QtWidgets import QAbstractSpinBox, QDockWidget, QScrollArea
 
 MODELS = Path(__file__).resolve().parents[1] / "models"
 
 
 @pytest.fixture()
-def window(qtbot, tmp_path, config_dir, monkeypatch):
-    monkeypatch.setenv("ARAPP_GUI_ENGINE", "threads")
-    w = open_main_window(qtbot, tmp_path)
-    w.show()
-    yield w
-    close_main_window(w)
+def window(threads_window):
+    return threads_window
 
 
 def _shows_whole_text(box: QAbstractSpinBox) -> bool:

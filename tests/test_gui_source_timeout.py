@@ -9,7 +9,7 @@ import threading
 
 import numpy as np
 import pytest
-from gui_helpers import TIMEOUT_MS, close_main_window, open_main_window, write_arc_recording
+from gui_helpers import TIMEOUT_MS, write_arc_recording
 
 SHORT_S = 0.5  # the test's time limit for a first picture (the app's is 15 s)
 
@@ -37,12 +37,8 @@ class StuckCamera:
 
 
 @pytest.fixture()
-def window(qtbot, tmp_path, config_dir, monkeypatch):
-    monkeypatch.setenv("ARAPP_GUI_ENGINE", "threads")
-    w = open_main_window(qtbot, tmp_path)
-    w.show()
-    yield w
-    close_main_window(w)
+def window(threads_window):
+    return threads_window
 
 
 def stuck_engines(window, camera: StuckCamera, made: list):

@@ -5,27 +5,17 @@ a board's measurement soon after a map-only stretch. References: cv2.projectPoin
 truth, the anchors-only tracker."""
 
 import threading
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import tracking.tracker as tracker_module
-from scenes import load_recording, run_tracker
+from scenes import bundled_recording as recording, run_tracker
 from test_slam_flow import PLAIN, cv_project, look, texture, view  # noqa: F401  (texture: a fixture)
 from tracking.poses import make_pose
 from tracking.slam.features import FeatureExtractor
 from tracking.slam.flow import Tracks, relift, seed_on_plane
 from tracking.tracker import Tracker
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def recording(name, frames=None):
-    folder = ROOT / "recordings" / name
-    if not (folder / "groundtruth.tum").is_file():
-        pytest.fail(f"recordings/{name} with groundtruth.tum is part of the repository and must exist")
-    return load_recording(folder, frames)
 
 
 def test_relift_places_plane_seeds_from_a_new_pose_and_keeps_map_points(texture):  # noqa: F811

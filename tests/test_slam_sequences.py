@@ -2,24 +2,14 @@
 seconds away, bad frames, metric scale of the map. Bounds from the SLAM issue."""
 
 import threading
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tracking.anchors import plain_opencv_pose
 from tracking.evaluation import evaluate
-from scenes import away_and_back_keys, load_recording, render_sequence, run_tracker, scene_dict
+from scenes import away_and_back_keys, bundled_recording as recording, render_sequence, run_tracker, scene_dict
 from tracking.tracker import Tracker, TrackResult
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def recording(name, frames=None):
-    folder = ROOT / "recordings" / name
-    if not (folder / "groundtruth.tum").is_file():
-        pytest.fail(f"recordings/{name} with groundtruth.tum is part of the repository and must exist")
-    return load_recording(folder, frames)
 
 
 def plain_metrics(frames, session):

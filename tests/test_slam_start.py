@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from scenes import render_sequence
+from scenes import board_scene_dict, render_sequence
 from tracking.tracker import Tracker
 
 SMEARED = 4   # frames
@@ -18,13 +18,7 @@ SMEARED = 4   # frames
 def board_frames():
     keys = [{"t": 0.0, "eye": [0.06, -0.24, 0.42], "target": [0.10, 0.06, 0.0]},
             {"t": 0.5, "eye": [0.065, -0.24, 0.42], "target": [0.10, 0.06, 0.0]}]
-    sj = {"name": "still_board", "seed": 33, "fps": 30, "duration": 0.5,
-          "camera": {"width": 640, "height": 480, "hfov_deg": 62},
-          "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 5, "markers_y": 3,
-                       "marker_length": 0.032, "separation": 0.008, "first_id": 0}],
-          "desk": {"size": [1.8, 1.2], "ppm": 1500, "seed": 33},
-          "trajectory": {"kind": "keyframes", "keys": keys},
-          "effects": {"noise": 1.0}, "supersample": 1}
+    sj = board_scene_dict("still_board", keys, seed=33)
     frames, scene = render_sequence(sj)
     kernel = np.ones((1, 6), np.float32) / 6
     out = [(t, cv2.filter2D(img, -1, kernel) if i < SMEARED else img, gt) for i, (t, img, gt) in enumerate(frames)]
