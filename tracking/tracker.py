@@ -739,13 +739,15 @@ class Tracker:
 
     def _moving_fast(self, ar, t) -> bool:
         """Whether the anchors may have moved more than smear_px in the image since the last frame, by the
-        motion model or by their own measurement (the model lags when the camera turns around)."""
+        motion model or by their own raw measurement (the model lags when the camera turns around, and so
+        does a lone marker's filtered pose)."""
         if not self.flow or self.motion.last is None:
             return False
         corners = np.asarray(ar.object_points, float).reshape(-1, 3)
         last = self.camera.project_world(corners, self.motion.last)
+        measured = ar.raw_world_from_camera if ar.raw_world_from_camera is not None else self._anchor_output(ar)
         return any(np.linalg.norm(self.camera.project_world(corners, p) - last, axis=1).max() >= self.smear_px
-                   for p in (self.motion.predict(t), self._anchor_output(ar)))
+                   for p in (self.motion.predict(t), np.asarray(measured, float)))
 
     def _flow_result(self, got, t, t0, markers: int) -> TrackResult:
         start = self._flow_start if self._via_flow else t
