@@ -94,7 +94,8 @@ def _errors(frames, scene, unblur):
     errs = []
     for t, img, gt in frames:
         res = at.process(img, t)
-        errs.append(np.nan if res.world_from_camera is None else np.linalg.norm(res.world_from_camera[:3, 3] - gt[:3, 3]))
+        T = res.world_from_camera
+        errs.append(np.nan if T is None else np.linalg.norm(T[:3, 3] - gt[:3, 3]))
     return np.array(errs)
 
 

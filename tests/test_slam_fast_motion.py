@@ -208,3 +208,24 @@ def test_the_anchors_filter_does_not_hide_fast_motion_from_the_flow_check():
         with Tracker(session.camera, session.anchors, threaded=False, filter=filt) as tr:
             ate[filt] = run_tracker(tr, frames)["metrics"].ate_rmse_m
     assert ate[True] <= 1.1 * ate[False], ate
+
+
+def test_a_smeared_board_is_shown_through_the_anchors_filter():
+    """A board's own pose is shown as measured only while its corners fit it (PRECISE_RMS_PX); a board smeared
+    by a pan fits them to 0.6-1 px and read up to 28 mm off on tune_fast_pan_b, where the filter, which
+    weighs smeared measurements less, was 3 mm off."""
+    from types import SimpleNamespace
+
+    from tracking.tracker import PRECISE_RMS_PX
+
+    raw, filtered = np.eye(4), np.eye(4)
+    raw[0, 3], filtered[0, 3] = 0.03, 0.003
+    board = SimpleNamespace(object_points=np.zeros((56, 3)), raw_world_from_camera=raw, world_from_camera=filtered,
+                            covered=False, reprojection_error=0.2)
+    assert PRECISE_RMS_PX <= 0.6
+    assert Tracker._anchor_output(board)[0, 3] == 0.03
+    board.reprojection_error = 0.8
+    assert Tracker._anchor_output(board)[0, 3] == 0.003
+    lone = SimpleNamespace(object_points=np.zeros((4, 3)), raw_world_from_camera=raw, world_from_camera=filtered,
+                           covered=False, reprojection_error=0.05)
+    assert Tracker._anchor_output(lone)[0, 3] == 0.003

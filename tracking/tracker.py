@@ -65,6 +65,9 @@ from tracking.slam.tracking import MotionModel, match_by_projection, plausible, 
 
 MIN_SIDE = 48  # pixels: smaller frames carry nothing trackable
 MAX_TRACKS = 200  # keypoints followed by optical flow between full frames
+# pixels: RMS reprojection error up to which a board's (12+ corners) own pose is shown as measured; sharp
+# boards fit to 0.1-0.3 px, boards smeared by a fast pan to 0.6-1 px
+PRECISE_RMS_PX = 0.6
 FLOW_SEEDS = 300  # points followed by optical flow when the anchors and the map both fail
 
 
@@ -770,14 +773,17 @@ class Tracker:
 
     @staticmethod
     def _precise(ar) -> bool:
-        """The anchors' pose this frame rests on 12 or more corners, none partly covered (shown raw)."""
+        """The anchors' pose this frame rests on 12 or more corners, none partly covered (a board: the output
+        fades onto it over `precise_blend_frames`)."""
         return ar is not None and not ar.covered and len(ar.object_points) >= 12
 
     @staticmethod
     def _anchor_output(ar) -> np.ndarray:
         """The anchors' pose to show: a board's or QR code's many corners are precise as measured (the
-        filter would only add lag on a moving camera); a lone marker's four are smoothed by its filter."""
-        return np.asarray(ar.raw_world_from_camera if len(ar.object_points) >= 12 else ar.world_from_camera, float)
+        filter would only add lag on a moving camera); a lone marker's four, or a board's corners that fit
+        poorly (smeared), are smoothed by its filter, which weighs smeared measurements less."""
+        raw = len(ar.object_points) >= 12 and ar.reprojection_error <= PRECISE_RMS_PX
+        return np.asarray(ar.raw_world_from_camera if raw else ar.world_from_camera, float)
 
     def _plausible(self, pose, ref, t, lost: bool = False) -> bool:
         if ref is None:

@@ -192,6 +192,19 @@ TUNING_TWINS: dict[str, dict] = {
         "video": {"fourcc": "MJPG", "quality": 70},
         "supersample": 2,
     },
+    # Fast pans over a 4x3 GridBoard (3.4 cm markers), 1.25 cycles: the second fast-pan twin (made in stop 13).
+    "tune_fast_pan_b": {
+        "name": "tune_fast_pan_b", "seed": 306, "fps": 30, "duration": 2.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 60, "dist": [-0.06, 0.035, 0.0003, -0.0004, 0.0]},
+        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
+                     "marker_length": 0.034, "separation": 0.008, "first_id": 35}],
+        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": 406},
+        "trajectory": {"kind": "pan", "azimuth": -90, "distance": 0.49, "elevation": 59, "pan_deg": 21,
+                       "cycles": 1.25, "shake": {"pos_mm": 2.6, "rot_deg": 0.5, "freq_hz": 2.6}},
+        "effects": _webcam(motion_blur=0.6, blur_samples=7, rolling_shutter=0.03),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
 }
 PRESETS.update(TUNING_TWINS)
 
