@@ -89,4 +89,5 @@ class ReplayBar(QWidget):
             self.slider.blockSignals(True)
             self.slider.setValue(index)
             self.slider.blockSignals(False)
-        self.time_label.setText(f"{format_time(t)} / {format_time(self._total)}")
+        # a source with no known length (a plain video read straight through, a camera) shows the time only
+        self.time_label.setText(f"{format_time(t)} / {format_time(self._total)}" if self._total else format_time(t))
