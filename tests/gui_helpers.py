@@ -53,3 +53,11 @@ def close_main_window(w) -> None:
     for box in w.open_error_boxes():
         box.close()
     w.close()
+
+
+def grab_rgb(widget) -> np.ndarray:
+    """The widget as painted (overlay children included), RGB uint8 (H,W,3), widget pixels."""
+    img = widget.grab().toImage()
+    img = img.convertToFormat(img.Format.Format_RGB888)
+    w, h = img.width(), img.height()
+    return np.frombuffer(img.constBits(), np.uint8).reshape(h, img.bytesPerLine())[:, : w * 3].reshape(h, w, 3).copy()

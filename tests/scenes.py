@@ -34,6 +34,20 @@ def scene_dict(name: str, keys: list[dict], fps: float = 30.0, width: int = 640,
     }
 
 
+def rolling_shutter_pixels(camera, world, pose_at, t: float, iterations: int = 30):
+    """Pixels (N,2) of world points (N,3) under a rolling shutter: each seen at the time of the row it lands
+    on (row y exposed at t + camera.readout * ((y + 0.5) / height - 0.5)), by fixed-point iteration;
+    `pose_at(t)` gives world_from_camera at any time t (seconds)."""
+    import numpy as np
+
+    world = np.asarray(world, float).reshape(-1, 3)
+    px = camera.project_world(world, pose_at(t))
+    for _ in range(iterations):
+        d = camera.readout * ((px[:, 1] + 0.5) / camera.height - 0.5)
+        px = np.array([camera.project_world(world[i:i + 1], pose_at(t + d[i]))[0] for i in range(len(world))])
+    return px
+
+
 # A 5x3 GridBoard of 32 mm DICT_4X4_50 markers (ids 0-14), 8 mm apart: the kind of board fast pans are tracked on.
 BOARD_5X3 = {"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 5, "markers_y": 3,
              "marker_length": 0.032, "separation": 0.008, "first_id": 0}

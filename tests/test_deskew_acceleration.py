@@ -12,15 +12,10 @@ correction must give the projection from the centre-row pose.
 import cv2
 import numpy as np
 
-from tracking.anchors import AnchorTracker
 from tracking.anchors.detect import Observation
-from tracking.anchors.model import build_models
-from tracking.camera import Camera
-from tracking.session import parse_anchors
+from scenes import rolling_shutter_pixels
+from test_rolling_shutter import board_under_rolling_shutter
 
-K = np.array([[530.0, 0, 319.5], [0, 530.0, 239.5], [0, 0, 1]])
-BOARD = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
-          "marker_length": 0.04, "separation": 0.01}]
 W0 = np.array([0.1, 0.3, 0.0])      # rad/s at t = 0
 ALPHA = np.array([0.2, 4.0, 0.0])   # rad/s^2: a hand-held pan starting up (0.3 -> 0.57 rad/s in 2 frames)
 
@@ -33,28 +28,13 @@ def _pose_at(t):
     return T
 
 
-def _rolling(cam, world, t):
-    """Pixels of world points each seen at its own row's time (fixed point: the row depends on the pixel)."""
-    px = cam.project_world(world, _pose_at(t))
-    for _ in range(30):
-        d = cam.readout * ((px[:, 1] + 0.5) / cam.height - 0.5)
-        px = np.array([cam.project_world(world[i:i + 1], _pose_at(t + d[i]))[0] for i in range(len(world))])
-    return px
-
-
 def _left_after(frames: int) -> tuple[float, float]:
-    cam = Camera(K, [-0.08, 0.04, 0.0, 0.0, 0.0], 640, 480, readout=0.03)
-    anchors = parse_anchors(BOARD)
-    tracker = AnchorTracker(anchors, cam)
-    m = build_models(anchors)[0]
-    ids = sorted(m.markers)
-    obj = np.concatenate([m.markers[i] for i in ids])
-    world = m.to_world(obj)
+    cam, tracker, obj, world, groups = board_under_rolling_shutter()
     for k in range(frames):
         t = k / 30.0
-        seen = _rolling(cam, world, t)
+        seen = rolling_shutter_pixels(cam, world, _pose_at, t)
         truth = cam.project_world(world, _pose_at(t))
-        out = tracker._deskew([Observation(0, obj, seen, np.repeat(ids, 4), len(ids))], t)[0]
+        out = tracker._deskew([Observation(0, obj, seen, groups, len(groups) // 4)], t)[0]
     return float(np.abs(seen - truth).max()), float(np.abs(out.img - truth).max())
 
 

@@ -8,7 +8,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from PySide6.QtCore import QSettings
+
+from gui_helpers import grab_rgb
 
 ANCHORS = [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0, "length": 0.08}]
 TIMEOUT_MS = 30000
@@ -32,27 +33,10 @@ def recording(tmp_path_factory):
 
 
 @pytest.fixture()
-def window(qtbot, tmp_path, monkeypatch):
-    monkeypatch.setenv("ARAPP_CONFIG_DIR", str(tmp_path / "config"))
-    monkeypatch.setenv("ARAPP_GUI_ENGINE", "threads")
-    from arapp.gui.main_window import MainWindow
-
-    w = MainWindow(settings=QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat))
-    w.full_frames = True  # the frame as captured comes with each shown frame
-    qtbot.addWidget(w)
-    w.resize(1100, 700)
-    w.show()
-    yield w
-    for box in w.open_error_boxes():
-        box.close()
-    w.close()
-
-
-def view_pixels(window) -> np.ndarray:
-    """The view as painted (overlay children included), RGB, widget pixels."""
-    img = window.view.grab().toImage().convertToFormat(window.view.grab().toImage().Format.Format_RGB888)
-    w, h = img.width(), img.height()
-    return np.frombuffer(img.constBits(), np.uint8).reshape(h, img.bytesPerLine())[:, : w * 3].reshape(h, w, 3).copy()
+def window(threads_window):
+    threads_window.full_frames = True  # the frame as captured comes with each shown frame
+    threads_window.resize(1100, 700)
+    return threads_window
 
 
 def edge_samples(frame: np.ndarray) -> np.ndarray:
@@ -112,13 +96,13 @@ def test_detected_marker_outlined_when_on_and_not_when_off(qtbot, window, record
     pts = to_widget(window, edge_samples(frame), frame.shape)
     window.marker_marks_action.setChecked(False)
     qtbot.wait(100)
-    off = view_pixels(window)
+    off = grab_rgb(window.view)
     window.marker_marks_action.setChecked(True)
     qtbot.wait(100)
-    on = view_pixels(window)
+    on = grab_rgb(window.view)
     window.marker_marks_action.setChecked(False)
     qtbot.wait(100)
-    off_again = view_pixels(window)
+    off_again = grab_rgb(window.view)
 
     # on: the outline's colour along every edge; off: the same picture as before
     assert (changed_at(off, on, pts) > 60).mean() >= 0.9

@@ -9,32 +9,18 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from PySide6.QtCore import QPoint, QSettings, Qt
+from PySide6.QtCore import QPoint, Qt
+
+from gui_helpers import grab_rgb
 
 MODELS = Path(__file__).resolve().parents[1] / "models"
 TIMEOUT_MS = 30000
 
 
 @pytest.fixture()
-def window(qtbot, tmp_path, monkeypatch):
-    monkeypatch.setenv("ARAPP_CONFIG_DIR", str(tmp_path / "config"))
-    monkeypatch.setenv("ARAPP_GUI_ENGINE", "threads")
-    from arapp.gui.main_window import MainWindow
-
-    w = MainWindow(settings=QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat))
-    qtbot.addWidget(w)
-    w.resize(1100, 700)
-    w.show()
-    yield w
-    for box in w.open_error_boxes():
-        box.close()
-    w.close()
-
-
-def grab_rgb(widget) -> np.ndarray:
-    img = widget.grab().toImage().convertToFormat(widget.grab().toImage().Format.Format_RGB888)
-    w, h = img.width(), img.height()
-    return np.frombuffer(img.constBits(), np.uint8).reshape(h, img.bytesPerLine())[:, : w * 3].reshape(h, w, 3).copy()
+def window(threads_window):
+    threads_window.resize(1100, 700)
+    return threads_window
 
 
 def projected_box(orbit_view, vertices) -> np.ndarray:

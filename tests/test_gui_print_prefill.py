@@ -11,7 +11,6 @@ import stat
 from pathlib import Path
 
 import pytest
-from PySide6.QtCore import QSettings
 
 MODELS = Path(__file__).resolve().parents[1] / "models"
 KEY = "Zq8v3KJ2x9TEST0KEY0do0not0log0Wm"
@@ -19,18 +18,8 @@ TIMEOUT_MS = 30000
 
 
 @pytest.fixture()
-def window(qtbot, tmp_path, monkeypatch):
-    monkeypatch.setenv("ARAPP_CONFIG_DIR", str(tmp_path / "config"))
-    monkeypatch.setenv("ARAPP_GUI_ENGINE", "threads")
-    from arapp.gui.main_window import MainWindow
-
-    w = MainWindow(settings=QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat))
-    qtbot.addWidget(w)
-    w.show()
-    yield w
-    for box in w.open_error_boxes():
-        box.close()
-    w.close()
+def window(threads_window):
+    return threads_window
 
 
 def print_panel(qtbot, w):

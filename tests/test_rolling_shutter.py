@@ -16,6 +16,7 @@ from tracking.anchors.model import build_models
 from tracking.camera import Camera
 from tracking.errors import CalibrationError
 from tracking.session import parse_anchors
+from scenes import rolling_shutter_pixels
 
 K = np.array([[530.0, 0, 319.5], [0, 530.0, 239.5], [0, 0, 1]])
 BOARD = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
@@ -32,23 +33,24 @@ def _pose_at(t, w, v):
 
 
 def _rolling(cam, world, t, w, v):
-    """Pixels of world points each seen at its own row's time (fixed point: the row depends on the pixel)."""
-    px = cam.project_world(world, _pose_at(t, w, v))
-    for _ in range(30):
-        d = cam.readout * ((px[:, 1] + 0.5) / cam.height - 0.5)
-        px = np.array([cam.project_world(world[i:i + 1], _pose_at(t + d[i], w, v))[0] for i in range(len(world))])
-    return px
+    """Pixels of world points each seen at its own row's time."""
+    return rolling_shutter_pixels(cam, world, lambda s: _pose_at(s, w, v), t)
 
 
-def test_corners_moved_to_the_centre_row_time():
+def board_under_rolling_shutter():
+    """(camera with a 30 ms readout, AnchorTracker on BOARD, the board's object points, their world points,
+    marker id of each point)."""
     cam = Camera(K, [-0.08, 0.04, 0.0, 0.0, 0.0], 640, 480, readout=0.03)
     anchors = parse_anchors(BOARD)
-    tracker = AnchorTracker(anchors, cam)
     m = build_models(anchors)[0]
     ids = sorted(m.markers)
     obj = np.concatenate([m.markers[i] for i in ids])
-    world = m.to_world(obj)
-    groups = np.repeat(ids, 4)
+    return cam, AnchorTracker(anchors, cam), obj, m.to_world(obj), np.repeat(ids, 4)
+
+
+def test_corners_moved_to_the_centre_row_time():
+    cam, tracker, obj, world, groups = board_under_rolling_shutter()
+    ids = np.unique(groups)
     w, v = [0.2, 1.3, 0.1], [0.05, -0.02, 0.0]   # a fast pan: ~75 deg/s
     out = None
     for k in range(2):

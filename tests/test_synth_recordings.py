@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -15,6 +17,7 @@ from tracking.synth.presets import PRESETS, TEST, TUNING
 from tracking.synth.renderer import DeskRenderer
 
 from conftest import ROOT
+from scenes import rolling_shutter_pixels as pixels_under_rolling_shutter
 
 RECORDINGS = ROOT / "recordings"
 
@@ -63,12 +66,8 @@ def rolling_shutter_pixels(session, anchor, renderer, t, readout):
     """Ground-truth corners under a rolling shutter: each corner seen at the time of the row it lands on
     (row y exposed at t + readout * ((y + 0.5) / H - 0.5)), by fixed-point iteration on the trajectory."""
     obj = transform_points(anchor.world_from_anchor, anchor_corners(anchor)).reshape(-1, 3)
-    cam = session.camera
-    px = cam.project_world(obj, renderer.world_from_camera(t))
-    for _ in range(4):
-        px = np.array([cam.project_world(p, renderer.world_from_camera(t + readout * ((q[1] + 0.5) / cam.height - 0.5)))
-                       for p, q in zip(obj, px)])
-    return px.reshape(-1, 4, 2)
+    cam = dataclasses.replace(session.camera, readout=readout)
+    return pixels_under_rolling_shutter(cam, obj, renderer.world_from_camera, t, iterations=4).reshape(-1, 4, 2)
 
 
 @pytest.mark.parametrize("name", list(PRESETS))
