@@ -17,6 +17,7 @@ from tracking.anchors.kinds import KINDS, AnchorSpec, kind_names
 from tracking.anchors.kinds.base import aruco_dictionary_names
 from tracking.camera import Camera
 from tracking.errors import CalibrationError, SessionError
+from tracking.jsonfile import read_json
 
 FORMAT = "arapp-recording/1"
 # The registered kind names at import time; the table itself (kinds registered later included) is KINDS.
@@ -101,13 +102,7 @@ class Session:
 def read_anchor_blocks(path: str | Path) -> list:
     """The anchor blocks of an anchors JSON file (`--anchors`): a list as in session.json, or an object
     with an "anchors" list (a session.json itself). Unparsed; SessionError naming the file when unreadable."""
-    path = Path(path)
-    if not path.is_file():
-        raise SessionError(f"{path}: anchors file does not exist")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise SessionError(f"{path}: invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}") from None
+    data = read_json(path, "anchors", SessionError, expect=None)
     return data.get("anchors") if isinstance(data, dict) else data
 
 

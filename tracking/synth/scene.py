@@ -26,7 +26,6 @@ and for a board world (z into the paper) it is the world turned over x.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +34,7 @@ import numpy as np
 
 from tracking.camera import Camera
 from tracking.errors import CalibrationError, SessionError
+from tracking.jsonfile import read_json
 from tracking.poses import invert
 from tracking.session import AnchorSpec, parse_anchors
 from tracking.synth.patterns import pattern_for
@@ -251,8 +251,4 @@ def load_scene(path: str | Path) -> Scene:
     path = Path(path)
     if not path.is_file():
         raise SessionError(f"{path}: scene file does not exist (give a preset name or a JSON file)")
-    try:
-        data = json.loads(path.read_text())
-    except json.JSONDecodeError as e:
-        raise SessionError(f"{path}: invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}") from None
-    return parse_scene(data, str(path))
+    return parse_scene(read_json(path, "scene", SessionError), str(path))
