@@ -106,6 +106,7 @@ class AnchorTracker:
         self.camera = camera
         self.models: list[AnchorModel] = build_models(self.anchors)
         self.world_from_anchor = [m.world_from_anchor for m in self.models]
+        self._outlines = np.concatenate([m.to_world(m.outline()) for m in self.models])   # world points (N,3)
         self.aruco = ArucoDetection(self.models, camera)
         self.qr = QRTracking(self.models, camera)
         self.filter_enabled = bool(filter)
@@ -376,9 +377,8 @@ class AnchorTracker:
         (then motion blur, not a hand, is what lowers a margin's contrast: the smear weighting handles it)."""
         if pred_cfw is None or not self.filter.initialised:
             return False
-        pts = np.concatenate([m.to_world(m.outline()) for m in self.models])
-        now, _ = project(self.camera, pred_cfw, pts)
-        last, _ = project(self.camera, invert(self.filter.pose()), pts)
+        now, _ = project(self.camera, pred_cfw, self._outlines)
+        last, _ = project(self.camera, invert(self.filter.pose()), self._outlines)
         return bool(np.median(np.linalg.norm(now - last, axis=1)) >= self.smear_px)
 
     def _drop_covered(self, gray: np.ndarray, obs: list[Observation], fast: bool = False,
