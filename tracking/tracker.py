@@ -185,9 +185,11 @@ class TrackerConfig:
     the map) start it better. 0 turns the check off."""
     smear_gate_px: float = 1.0
     """pixels: median gap between flow-projected and detected marker corners that distrusts the markers."""
-    smear_hold_s: float = 0.5
+    smear_hold_s: float = 1.0
     """seconds: the longest the flow overrules smeared markers (after that they win again, so flow drift
-    is always bounded by the markers)."""
+    is always bounded by the markers). 1 s: since the flow fits each point at the centre row's time
+    (rolling shutter), its drift over a fast pan's second stays under the error of a board returning
+    smeared (0.5 s let that board pull the pose 2 cm off on the tuning pans)."""
     flow_hold_s: float = 2.0
     """seconds: the longest that flow alone (neither anchors nor map confirming) carries the pose; after
     that the frame is lost until the anchors or the map take it up again."""
@@ -631,7 +633,8 @@ class Tracker:
         if self._full_tracks < 4 * self.min_inliers or len(self._flow) < 0.6 * self._full_tracks:
             return None
         pred = self.motion.predict(t)
-        got = follow(self.camera, self._flow, gray, pred, self.min_inliers, min_inlier_ratio=0.8)
+        got = follow(self.camera, self._flow, gray, pred, self.min_inliers, min_inlier_ratio=0.8,
+                     dt=t - self.motion.last_t)
         if got is None or not self._plausible(got[0], self.motion.last, t):
             return None
         self._flow = got[1]
@@ -658,8 +661,9 @@ class Tracker:
             return None
         tracks = self._flow
         if tracks is None or len(tracks) < FLOW_SEEDS // 2:
-            tracks = seed_on_plane(self.camera, self._prev_gray, self.motion.last, FLOW_SEEDS, keep=tracks)
-        got = follow(self.camera, tracks, gray, self.motion.predict(t), self.min_inliers)
+            tracks = seed_on_plane(self.camera, self._prev_gray, self.motion.last, FLOW_SEEDS, keep=tracks,
+                                   later=(self.motion.predict(t), t - self.motion.last_t))
+        got = follow(self.camera, tracks, gray, self.motion.predict(t), self.min_inliers, dt=t - self.motion.last_t)
         if got is None or not self._plausible(got[0], self.motion.last, t):
             return None
         return got

@@ -22,6 +22,15 @@ stay marked (`Tracks.planar`): followed into a frame whose pose the anchors
 measured, they can be placed on the plane again from that pose (`relift`)
 instead of being seeded afresh.
 
+Rolling shutter: a camera that reads its rows out over `camera.readout` seconds
+sees each point at its row's time, not the frame's (the centre row's). In a fast
+pan that shears the image by pixels, which a pose fit reads as tilt and shift,
+and which, lifted onto the plane, moves the seeds themselves. Each followed
+point's own image velocity (its motion since the last frame) moves it to the
+centre row's time before it is fitted or placed on the plane (`deskew`); new
+seeds, which have no motion yet, take it from the points around them or, with
+none, from the motion model's next pose.
+
 Pixels: `xy` are distorted image pixels (what the flow measures); the pose fit
 works on undistorted pixels. World points in metres, poses `world_from_camera`.
 """
@@ -50,13 +59,17 @@ class Tracks:
     pixels there (N,2) float32; `X` the world points they image (N,3) metres; `moved` how far each
     moved from the frame before, pixels (N,2), when they were followed into this one; `planar` (N,) bool,
     which of them were placed on the anchors' plane from a pose (seeds; the others are map points), None
-    for none."""
+    for none; `velocity` (N,2) their image velocity in pixels/s as used to move them to the centre row's
+    time (see `deskew`), None when not known; `path_velocity` (N,2) pixels/s, their displacement over
+    the last frame interval divided by it (NaN rows where not followed), None when not known."""
 
     image: np.ndarray
     xy: np.ndarray
     X: np.ndarray
     moved: np.ndarray | None = None
     planar: np.ndarray | None = None
+    velocity: np.ndarray | None = None
+    path_velocity: np.ndarray | None = None
 
     def planar_mask(self) -> np.ndarray:
         """`planar` as a bool array (N,) (all False when None)."""
@@ -68,6 +81,65 @@ class Tracks:
 
     def __len__(self) -> int:
         return int(self.xy.shape[0])
+
+
+def row_offsets(camera: Camera, y: np.ndarray) -> np.ndarray:
+    """Seconds from the frame's time (its centre row's) at which rows y (N,) were read out."""
+    return camera.readout * ((np.asarray(y, float) + 0.5) / camera.height - 0.5)
+
+
+def deskew(camera: Camera, xy: np.ndarray, velocity: np.ndarray | None) -> np.ndarray:
+    """Distorted pixels xy (N,2) moved to where they would be at the frame's centre-row time, given
+    their image velocity (N,2) pixels/s (first order); xy as they are without a rolling shutter or a
+    velocity."""
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    if camera.readout <= 0 or velocity is None:
+        return xy
+    return xy - np.asarray(velocity, float).reshape(-1, 2) * row_offsets(camera, xy[:, 1])[:, None]
+
+
+def velocity_field(xy: np.ndarray, velocity: np.ndarray, at: np.ndarray, min_points: int = 12) -> np.ndarray | None:
+    """The image velocity (M,2) pixels/s at pixels `at` (M,2), from an affine field fitted to the
+    velocities (N,2) of points at xy (N,2); None with fewer than `min_points` points."""
+    if len(xy) < min_points:
+        return None
+    A, *_ = np.linalg.lstsq(np.c_[xy, np.ones(len(xy))], velocity, rcond=None)
+    return np.c_[np.asarray(at, float).reshape(-1, 2), np.ones(len(at))] @ A
+
+
+def _row_time_velocity(camera: Camera, before: np.ndarray, now: np.ndarray, ok: np.ndarray, dt: float,
+                       before_velocity: np.ndarray | None = None) -> np.ndarray:
+    """Image velocities (N,2) pixels/s of points followed from `before` to `now` (N,2 pixels, dt seconds
+    apart), as they are over the stretch that moves each to the centre row's time. The displacement over
+    dt is the velocity about halfway along the path; a pan's image velocity changes across the image
+    (quadratically: faster towards the edges), so it is carried from there to the middle of the stretch
+    the deskew covers by the gradient of a quadratic field (a camera moving over a plane gives one)
+    fitted to the followed points (`ok`). Points that were followed into `before` too (their path
+    velocity then, `before_velocity` (N,2), finite) are carried on by their own change of velocity
+    instead, which holds the field's change across the image and in time alike (a pan turning round)."""
+    v = (now - before) / dt
+    if ok.sum() < 24:
+        return v
+    scale = float(camera.K[0, 0])
+    c = camera.K[:2, 2]
+    mid = ((now[ok] + before[ok]) / 2 - c) / scale
+    x, y = mid[:, 0], mid[:, 1]
+    coef, *_ = np.linalg.lstsq(np.c_[np.ones_like(x), x, y, x * x, x * y, y * y], v[ok], rcond=None)
+    q = (now - c) / scale
+    x, y = q[:, 0], q[:, 1]
+    zero, one = np.zeros_like(x), np.ones_like(x)
+    # d(field)/dx and d(field)/dy at each point, per pixel
+    gx = np.c_[zero, one, zero, 2 * x, y, zero] @ coef / scale
+    gy = np.c_[zero, zero, one, zero, x, 2 * y] @ coef / scale
+    shift = v * ((dt - row_offsets(camera, now[:, 1])) / 2)[:, None]   # from halfway along the path
+    out = v + shift[:, :1] * gx + shift[:, 1:] * gy
+    if before_velocity is not None:
+        # the two path velocities are dt apart (the frame interval taken as steady); from the last one's
+        # time (halfway along the path) to the middle of the deskew stretch is (dt + d) / 2
+        had = np.isfinite(before_velocity).all(axis=1)
+        d = row_offsets(camera, now[had, 1])
+        out[had] = v[had] + (v[had] - before_velocity[had]) * ((dt + d) / (2 * dt))[:, None]
+    return out
 
 
 def lift_to_plane(camera: Camera, world_from_camera: np.ndarray, xy: np.ndarray,
@@ -114,23 +186,51 @@ def _corners(gray: np.ndarray, n: int, min_distance: int, taken: np.ndarray) -> 
     return np.zeros((0, 2), np.float32) if got is None else (scale * got.reshape(-1, 2)).astype(np.float32)
 
 
+def _seed_velocity(camera: Camera, new: np.ndarray, keep: Tracks | None, world_from_camera: np.ndarray,
+                   later: tuple[np.ndarray, float] | None) -> np.ndarray | None:
+    """Image velocities (N,2) pixels/s for new seeds at distorted pixels `new`: the field of the kept
+    points' measured velocities, else the motion `later` = (world_from_camera dt seconds on, dt)
+    predicts for their plane points; None when neither is known."""
+    if keep is not None and keep.velocity is not None:
+        v = velocity_field(keep.xy, keep.velocity, new)
+        if v is not None:
+            return v
+    if later is None or later[0] is None or not later[1] > 0:
+        return None
+    X, _ = lift_to_plane(camera, world_from_camera, new)
+    return (camera.project_world(X, later[0]) - camera.project_world(X, world_from_camera)) / later[1]
+
+
 def seed_on_plane(camera: Camera, gray: np.ndarray, world_from_camera: np.ndarray, n: int = 300,
-                  keep: Tracks | None = None, min_distance: int = 10) -> Tracks:
+                  keep: Tracks | None = None, min_distance: int = 10,
+                  later: tuple[np.ndarray, float] | None = None) -> Tracks:
     """Tracks for the grey image `gray` taken at `world_from_camera`: the points of `keep` (if any,
     measured in this same image) plus up to n - len(keep) new corners (Shi-Tomasi), away from those,
-    placed on the anchors' plane (marked `planar`)."""
+    placed on the anchors' plane (marked `planar`). With a rolling shutter the new corners are moved to
+    the centre row's time first (see `_seed_velocity`; `later` = (the pose dt seconds on, dt))."""
     xy = np.zeros((0, 2), np.float32) if keep is None else keep.xy
     X = np.zeros((0, 3)) if keep is None else keep.X
     planar = np.zeros(0, bool) if keep is None else keep.planar_mask()
+    velocity = None if keep is None else keep.velocity
+    path_velocity = None if keep is None else keep.path_velocity
     want = n - xy.shape[0]
     if want > 0:
         new = _corners(gray, want, min_distance, xy)
         if len(new):
-            Xn, ok = lift_to_plane(camera, world_from_camera, new)
+            v = _seed_velocity(camera, new, keep, world_from_camera, later) if camera.readout > 0 else None
+            Xn, ok = lift_to_plane(camera, world_from_camera, deskew(camera, new, v))
+            if velocity is not None or (v is not None and not len(xy)):
+                vn = np.zeros((len(new), 2)) if v is None else v
+                velocity = np.vstack([np.zeros((0, 2)) if velocity is None else velocity, vn[ok]])
+            else:
+                velocity = None
+            if path_velocity is not None:
+                path_velocity = np.vstack([path_velocity, np.full((int(ok.sum()), 2), np.nan)])
             xy = np.vstack([xy, new[ok]])
             X = np.vstack([X, Xn[ok]])
             planar = np.concatenate([planar, np.ones(int(ok.sum()), bool)])
-    return Tracks(gray, np.ascontiguousarray(xy, np.float32), X, planar=planar)
+    return Tracks(gray, np.ascontiguousarray(xy, np.float32), X, planar=planar, velocity=velocity,
+                  path_velocity=path_velocity)
 
 
 def relift(camera: Camera, tracks: Tracks, world_from_camera: np.ndarray) -> Tracks:
@@ -141,22 +241,27 @@ def relift(camera: Camera, tracks: Tracks, world_from_camera: np.ndarray) -> Tra
     if not planar.any():
         return tracks
     X = tracks.X.copy()
-    Xn, ok = lift_to_plane(camera, world_from_camera, tracks.xy[planar])
+    v = None if tracks.velocity is None else tracks.velocity[planar]
+    Xn, ok = lift_to_plane(camera, world_from_camera, deskew(camera, tracks.xy[planar], v))
     X[planar] = Xn
     keep = ~planar
     keep[planar] = ok
     return Tracks(tracks.image, np.ascontiguousarray(tracks.xy[keep]), X[keep],
-                  None if tracks.moved is None else tracks.moved[keep], planar[keep])
+                  None if tracks.moved is None else tracks.moved[keep], planar[keep],
+                  None if tracks.velocity is None else tracks.velocity[keep],
+                  None if tracks.path_velocity is None else tracks.path_velocity[keep])
 
 
 def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarray, min_inliers: int = 20,
-           min_inlier_ratio: float = 0.6) -> tuple[np.ndarray, Tracks] | None:
+           min_inlier_ratio: float = 0.6, dt: float = 0.0) -> tuple[np.ndarray, Tracks] | None:
     """Follow `tracks` into the grey image `gray` and fit the pose there.
 
     The flow starts each point where `predicted` (world_from_camera, e.g. constant velocity) projects
     its world point, so fast motion needs no wide search. Returns (world_from_camera, the inlier tracks
     now measured in `gray`), or None when too few points were followed or the fit does not hold them
-    (fewer than `min_inliers`, or under `min_inlier_ratio` of the followed ones).
+    (fewer than `min_inliers`, or under `min_inlier_ratio` of the followed ones). `dt`: seconds since
+    `tracks.image`; with it and a rolling shutter each point is fitted where it would be at the centre
+    row's time, by its motion over those dt seconds.
     """
     if len(tracks) < min_inliers:
         return None
@@ -174,7 +279,10 @@ def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarr
         return None
     idx = np.nonzero(ok)[0]
     X = tracks.X[idx]
-    und = camera.undistort_points(nxt[idx].astype(float)) if camera.has_distortion else nxt[idx].astype(float)
+    velocity = (_row_time_velocity(camera, tracks.xy, nxt, ok, dt, tracks.path_velocity)
+                if dt > 0 and camera.readout > 0 else None)
+    seen = deskew(camera, nxt[idx], None if velocity is None else velocity[idx])
+    und = camera.undistort_points(seen) if camera.has_distortion else seen
     pose, inl, _ = refine_pose(camera.K, predicted, X, und)
     if inl.sum() < max(min_inliers, min_inlier_ratio * idx.size):
         # a poor prediction: start again from a RANSAC solution
@@ -187,5 +295,7 @@ def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarr
     keep = idx[inl]
     moved = nxt[keep] - tracks.xy[keep]
     planar = None if tracks.planar is None else tracks.planar_mask()[keep]
-    return pose, Tracks(gray, np.ascontiguousarray(nxt[keep], np.float32), tracks.X[keep], moved, planar)
+    return pose, Tracks(gray, np.ascontiguousarray(nxt[keep], np.float32), tracks.X[keep], moved, planar,
+                        None if velocity is None else velocity[keep],
+                        None if velocity is None else (moved / dt))
 
