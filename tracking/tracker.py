@@ -663,7 +663,8 @@ class Tracker:
         if tracks is None or len(tracks) < FLOW_SEEDS // 2:
             tracks = seed_on_plane(self.camera, self._prev_gray, self.motion.last, FLOW_SEEDS, keep=tracks,
                                    later=(self.motion.predict(t), t - self.motion.last_t))
-        got = follow(self.camera, tracks, gray, self.motion.predict(t), self.min_inliers, dt=t - self.motion.last_t)
+        got = follow(self.camera, tracks, gray, self.motion.predict(t), self.min_inliers, dt=t - self.motion.last_t,
+                     lifted_from=self.motion.last)
         if got is None or not self._plausible(got[0], self.motion.last, t):
             return None
         return got
@@ -672,7 +673,8 @@ class Tracker:
         """Whether the anchors' measurement this frame is to be distrusted in favour of the flow pose
         `got` (see smear_px / smear_sharpness / smear_gate_px / smear_hold_s): recently anchored, the
         image moved fast (the flow measures it without any pose), the markers' edges are smeared
-        along that motion, and the flow pose disagrees with the detected corners."""
+        along that motion, and either the corners do not fit well (`_fits_well`) or the flow pose
+        disagrees with them."""
         if got is None or self._anchor_t is None or t - self._anchor_t > self.smear_hold_s:
             return False
         motion = got[1].image_motion()
@@ -681,6 +683,10 @@ class Tracker:
         seen = np.asarray(ar.image_points, float).reshape(-1, 2)
         if not edge_sharpness(gray, seen, motion) < self.smear_sharpness:
             return False   # sharp (or unmeasurable) markers are measured where they are
+        if not self._fits_well(ar):
+            # a smeared board's corners can sit within a pixel of the flow's and still tilt its pose by
+            # a centimetre; a pose from a few markers' or from poorly fitting corners loses to the flow
+            return True
         corners = np.asarray(ar.object_points, float).reshape(-1, 3)
         gap = float(np.median(np.linalg.norm(self.camera.project_world(corners, got[0]) - seen, axis=1)))
         return gap > self.smear_gate_px
@@ -782,12 +788,16 @@ class Tracker:
         return ar is not None and not ar.covered and len(ar.object_points) >= 12
 
     @staticmethod
+    def _fits_well(ar) -> bool:
+        """The anchors' corners this frame are 12 or more and fit their pose to `PRECISE_RMS_PX`."""
+        return len(ar.object_points) >= 12 and ar.reprojection_error <= PRECISE_RMS_PX
+
+    @staticmethod
     def _anchor_output(ar) -> np.ndarray:
         """The anchors' pose to show: a board's or QR code's many corners are precise as measured (the
         filter would only add lag on a moving camera); a lone marker's four, or a board's corners that fit
         poorly (smeared), are smoothed by its filter, which weighs smeared measurements less."""
-        raw = len(ar.object_points) >= 12 and ar.reprojection_error <= PRECISE_RMS_PX
-        return np.asarray(ar.raw_world_from_camera if raw else ar.world_from_camera, float)
+        return np.asarray(ar.raw_world_from_camera if Tracker._fits_well(ar) else ar.world_from_camera, float)
 
     def _plausible(self, pose, ref, t, lost: bool = False) -> bool:
         if ref is None:

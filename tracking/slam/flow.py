@@ -98,13 +98,21 @@ def deskew(camera: Camera, xy: np.ndarray, velocity: np.ndarray | None) -> np.nd
     return xy - np.asarray(velocity, float).reshape(-1, 2) * row_offsets(camera, xy[:, 1])[:, None]
 
 
-def velocity_field(xy: np.ndarray, velocity: np.ndarray, at: np.ndarray, min_points: int = 12) -> np.ndarray | None:
-    """The image velocity (M,2) pixels/s at pixels `at` (M,2), from an affine field fitted to the
-    velocities (N,2) of points at xy (N,2); None with fewer than `min_points` points."""
+def _quadratic_basis(xy: np.ndarray, centre: np.ndarray, scale: float) -> np.ndarray:
+    x, y = ((np.asarray(xy, float).reshape(-1, 2) - centre) / scale).T
+    return np.c_[np.ones_like(x), x, y, x * x, x * y, y * y]
+
+
+def velocity_field(xy: np.ndarray, velocity: np.ndarray, at: np.ndarray, min_points: int = 24) -> np.ndarray | None:
+    """The image velocity (M,2) pixels/s at pixels `at` (M,2), from a quadratic field (what a camera
+    turning and moving over a plane gives, to first order) fitted to the velocities (N,2) of points at
+    xy (N,2); None with fewer than `min_points` points."""
     if len(xy) < min_points:
         return None
-    A, *_ = np.linalg.lstsq(np.c_[xy, np.ones(len(xy))], velocity, rcond=None)
-    return np.c_[np.asarray(at, float).reshape(-1, 2), np.ones(len(at))] @ A
+    xy = np.asarray(xy, float).reshape(-1, 2)
+    centre, scale = xy.mean(axis=0), float(max(xy.std(), 1.0))
+    coef, *_ = np.linalg.lstsq(_quadratic_basis(xy, centre, scale), velocity, rcond=None)
+    return _quadratic_basis(at, centre, scale) @ coef
 
 
 def _row_time_velocity(camera: Camera, before: np.ndarray, now: np.ndarray, ok: np.ndarray, dt: float,
@@ -219,11 +227,9 @@ def seed_on_plane(camera: Camera, gray: np.ndarray, world_from_camera: np.ndarra
         if len(new):
             v = _seed_velocity(camera, new, keep, world_from_camera, later) if camera.readout > 0 else None
             Xn, ok = lift_to_plane(camera, world_from_camera, deskew(camera, new, v))
-            if velocity is not None or (v is not None and not len(xy)):
+            if velocity is not None:
                 vn = np.zeros((len(new), 2)) if v is None else v
-                velocity = np.vstack([np.zeros((0, 2)) if velocity is None else velocity, vn[ok]])
-            else:
-                velocity = None
+                velocity = np.vstack([velocity, vn[ok]])
             if path_velocity is not None:
                 path_velocity = np.vstack([path_velocity, np.full((int(ok.sum()), 2), np.nan)])
             xy = np.vstack([xy, new[ok]])
@@ -252,8 +258,26 @@ def relift(camera: Camera, tracks: Tracks, world_from_camera: np.ndarray) -> Tra
                   None if tracks.path_velocity is None else tracks.path_velocity[keep])
 
 
+def _relift_first_followed(camera: Camera, tracks: Tracks, lifted_from: np.ndarray, path_velocity: np.ndarray,
+                           ok: np.ndarray) -> np.ndarray:
+    """World points (N,3) of `tracks`, those of its plane seeds followed (`ok`) for the first time (no
+    path velocity yet) placed on the plane again from `lifted_from`, moved to the centre row's time by
+    the path velocity (N,2) pixels/s now measured."""
+    first = tracks.planar_mask() & ok
+    if tracks.velocity is not None:
+        return tracks.X
+    if not first.any():
+        return tracks.X
+    Xn, good = lift_to_plane(camera, lifted_from, deskew(camera, tracks.xy[first], path_velocity[first]))
+    X = tracks.X.copy()
+    rows = np.nonzero(first)[0][good]
+    X[rows] = Xn[good]
+    return X
+
+
 def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarray, min_inliers: int = 20,
-           min_inlier_ratio: float = 0.6, dt: float = 0.0) -> tuple[np.ndarray, Tracks] | None:
+           min_inlier_ratio: float = 0.6, dt: float = 0.0,
+           lifted_from: np.ndarray | None = None) -> tuple[np.ndarray, Tracks] | None:
     """Follow `tracks` into the grey image `gray` and fit the pose there.
 
     The flow starts each point where `predicted` (world_from_camera, e.g. constant velocity) projects
@@ -261,7 +285,9 @@ def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarr
     now measured in `gray`), or None when too few points were followed or the fit does not hold them
     (fewer than `min_inliers`, or under `min_inlier_ratio` of the followed ones). `dt`: seconds since
     `tracks.image`; with it and a rolling shutter each point is fitted where it would be at the centre
-    row's time, by its motion over those dt seconds.
+    row's time, by its motion over those dt seconds. `lifted_from`: the pose (world_from_camera) of
+    `tracks.image`; with it, plane seeds followed for the first time are placed on the plane again with
+    the motion now measured (they were placed with a guess of it).
     """
     if len(tracks) < min_inliers:
         return None
@@ -278,9 +304,12 @@ def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarr
     if ok.sum() < min_inliers:
         return None
     idx = np.nonzero(ok)[0]
-    X = tracks.X[idx]
     velocity = (_row_time_velocity(camera, tracks.xy, nxt, ok, dt, tracks.path_velocity)
                 if dt > 0 and camera.readout > 0 else None)
+    X_all = tracks.X
+    if velocity is not None and lifted_from is not None:
+        X_all = _relift_first_followed(camera, tracks, lifted_from, (nxt - tracks.xy) / dt, ok)
+    X = X_all[idx]
     seen = deskew(camera, nxt[idx], None if velocity is None else velocity[idx])
     und = camera.undistort_points(seen) if camera.has_distortion else seen
     pose, inl, _ = refine_pose(camera.K, predicted, X, und)
@@ -295,7 +324,7 @@ def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarr
     keep = idx[inl]
     moved = nxt[keep] - tracks.xy[keep]
     planar = None if tracks.planar is None else tracks.planar_mask()[keep]
-    return pose, Tracks(gray, np.ascontiguousarray(nxt[keep], np.float32), tracks.X[keep], moved, planar,
+    return pose, Tracks(gray, np.ascontiguousarray(nxt[keep], np.float32), X_all[keep], moved, planar,
                         None if velocity is None else velocity[keep],
                         None if velocity is None else (moved / dt))
 
