@@ -64,6 +64,9 @@ class ArucoDetection:
         self.bits = {d: aruco_dictionary(d).markerSize + 2 for d in self.by_dict}
         self.bits.update({m.spec.dictionary_id: self.bits[m.spec.dictionary] for m in self.models})
         self.detectors = {d: cv2.aruco.ArucoDetector(aruco_dictionary(d), params) for d in self.by_dict}
+        # a lone marker's edges are sampled over its sides from this fraction on (edges.refine_squares
+        # end_margin, weak steps left out); None: as a board's, 0.2 (set by AnchorTracker)
+        self.lone_end_margin: float | None = None
         self.charuco = {}
         for m in self.models:
             if m.anchor_kind.detector == "charuco":
@@ -107,7 +110,7 @@ class ArucoDetection:
             quads = np.array([c for _, c, _ in found])
             side = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).min(axis=1)
             cell = side / np.array([self.bits[d] for _, _, d in found])
-            refined, ok = refine_squares(full, quads, cell, self.camera)
+            refined, ok = refine_squares(full, quads, cell, self.camera, **self._edge_span([m] * len(quads)))
             if not ok.all():
                 # corners the edges could not refine (cut by the image border, blur): gradient refinement
                 rest = quads[~ok].reshape(-1, 1, 2).astype(np.float32)
@@ -124,6 +127,13 @@ class ArucoDetection:
             groups = np.repeat([mid for mid, _ in found], 4)
             out.append(Observation(m.index, obj, img, groups, len(found), square=m.anchor_kind.single_square))
         return out
+
+    def _edge_span(self, models: list[AnchorModel]) -> dict:
+        """refine_squares' end_margin / strong_only for quads of these anchors (lone markers: `lone_end_margin`)."""
+        lone = np.array([m.anchor_kind.single_square for m in models], bool)
+        if self.lone_end_margin is None or not lone.any():
+            return {}
+        return {"end_margin": np.where(lone, self.lone_end_margin, 0.2), "strong_only": lone}
 
     def track(self, gray: np.ndarray, keys: set[tuple[int, int]], camera_from_world: np.ndarray,
               min_fraction: float = 0.6) -> list[Observation] | None:
@@ -149,7 +159,7 @@ class ArucoDetection:
         quads = px.reshape(-1, 4, 2)
         side = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).min(axis=1)
         cell = side / np.array([self.bits[by_index[a].spec.dictionary] for a, _ in keys])
-        refined, ok = refine_squares(gray, quads, cell, self.camera)
+        refined, ok = refine_squares(gray, quads, cell, self.camera, **self._edge_span([by_index[a] for a, _ in keys]))
         if ok.sum() < max(1, min_fraction * len(keys)):
             return None
         per_anchor: dict[int, list] = {}

@@ -20,7 +20,7 @@ import numpy as np
 
 from tracking.camera import Camera
 
-STRONG_STEP = 0.75   # with consensus_px: edge samples below this fraction of the marker's typical step are left out
+STRONG_STEP = 0.75   # with consensus_px or strong_only: edge samples below this fraction of the marker's typical step are left out
 
 
 def _distort(camera: Camera, und: np.ndarray) -> np.ndarray:
@@ -32,7 +32,9 @@ def _distort(camera: Camera, und: np.ndarray) -> np.ndarray:
 
 
 def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, camera: Camera | None = None,
-                   min_contrast: float = 8.0, consensus_px: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                   min_contrast: float = 8.0, consensus_px: float | None = None,
+                   end_margin: float | np.ndarray = 0.2,
+                   strong_only: bool | np.ndarray = False) -> tuple[np.ndarray, np.ndarray]:
     """Refine approximate square corners (M,4,2) (distorted pixels, consecutive corners along the sides).
 
     cell_px (M,): how far (pixels) each edge is from the next parallel edge inside/outside the square;
@@ -40,7 +42,13 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
     edge samples that the most samples lie within `consensus_px` of (then refitted to those): a finger
     over part of a side shifts a third of its samples by under a pixel, which the default median-based
     rejection keeps; samples whose step across the edge is under STRONG_STEP of the marker's median step
-    are left out first. Returns (refined (M,4,2), ok (M,) bool); quads that cannot be refined
+    are left out first. end_margin (scalar or (M,)): the fraction of each side left unsampled at either
+    end (the samples run from end_margin to 1 - end_margin of the side); a longer sampled stretch pins the
+    line's angle, and with it the corners the lines are extrapolated to, better, as long as no sample is
+    within the blur of the corner. strong_only (scalar or (M,) bool): leave out samples under STRONG_STEP
+    of the quad's typical step also without consensus_px (a fingertip on the black edge leaves a
+    black-to-skin step, and a longer stretch reaches it more often).
+    Returns (refined (M,4,2), ok (M,) bool); quads that cannot be refined
     (a side off the image or without contrast) are returned unchanged with ok False.
     """
     quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
@@ -64,12 +72,13 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
     b = np.roll(quads, -1, axis=1)
     length = np.linalg.norm(b - a, axis=2)  # (M,4)
     ns = 16
-    t = np.linspace(0.2, 0.8, ns)
+    em = np.broadcast_to(np.asarray(end_margin, dtype=np.float64), (len(quads),))
+    t = em[:, None] + (1.0 - 2.0 * em[:, None]) * np.linspace(0.0, 1.0, ns)[None, :]  # (M,ns)
     r = np.clip(0.45 * cell_px, 1.5, 5.0)  # (M,)
     steps = np.linspace(-1.0, 1.0, 17)  # fractions of r
     d = (b - a) / np.maximum(length[..., None], 1e-9)
     nrm = np.stack([-d[..., 1], d[..., 0]], axis=-1)  # (M,4,2)
-    base = a[:, :, None, :] + (b - a)[:, :, None, :] * t[None, None, :, None]  # (M,4,ns,2)
+    base = a[:, :, None, :] + (b - a)[:, :, None, :] * t[:, None, :, None]  # (M,4,ns,2)
     offs = steps[None, :] * r[:, None]  # (M,17)
     shift = np.zeros(base.shape[:-1])
     valid = np.ones(base.shape[:-1], bool)
@@ -104,11 +113,15 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
         pts = camera.undistort_points(pts)
     pts = pts.reshape(M, 4, ns, 2)
     wgt = valid.astype(np.float64)
-    if consensus_px is not None:
+    only = np.broadcast_to(np.asarray(strong_only, dtype=bool), (M,))
+    if consensus_px is not None or only.any():
         # a finger over the edge leaves a step from black to skin, well short of black to paper
         typical = np.array([np.median(np.abs(contrast[m][valid[m]])) if valid[m].any() else 0.0 for m in range(M)])
         strong = valid & (np.abs(contrast) >= STRONG_STEP * typical[:, None, None])
-        wgt = wgt * _consensus(pts, strong, consensus_px)
+        if consensus_px is not None:
+            wgt = wgt * _consensus(pts, strong, consensus_px)
+        else:
+            wgt = wgt * np.where(only[:, None, None], strong, True)
     for _ in range(2):
         cnt = wgt.sum(axis=-1)  # (M,4)
         c = (pts * wgt[..., None]).sum(axis=2) / np.maximum(cnt, 1)[..., None]

@@ -10,6 +10,16 @@ beyond three times its usual size (a sudden start or stop), so a still camera
 is smoothed hard while a moving one is followed closely. Velocity is
 corrected with the Benedict-Bordner gain beta = alpha^2 / (2 - alpha); with
 the velocity in the prediction, constant motion is followed without lag.
+
+Given the target's centre, the innovation is split in two. The orbit mode, the
+camera turning about the target's centre (moving across the line of sight to it
+while turning to keep it in place in the image), changes only the target's
+perspective, which a small target shows worst: a lone 6 cm marker's tilt noise
+moves the camera by millimetres along it, where a camera turn or a move along
+the line of sight shows as whole pixels. That mode gets its own cutoff, from
+its own speed (the camera's velocity across the line of sight; a hand-held
+camera's turning, which raises the other modes' cutoff, does not raise it), and
+never a higher gain than the rest.
 """
 
 from __future__ import annotations
@@ -72,14 +82,16 @@ class PoseFilter:
         return T
 
     def update(self, world_from_camera: np.ndarray, t: float, distance: float = 1.0,
-               sigma: float | None = None, weight: float = 1.0) -> np.ndarray:
+               sigma: float | None = None, weight: float = 1.0, centre: np.ndarray | None = None) -> np.ndarray:
         """Filtered pose after the measurement `world_from_camera` at time t (seconds).
 
         `distance` (metres, the scene depth) converts translation to the angle it subtends. `sigma`
         (radians, optional): the measurement's own noise; an innovation many sigmas large is motion the
         filter has not caught up with, and the gain rises toward 1 - (3 sigma / innovation)^2 so that a
         precise measurement is never lagged behind. `weight` (0..1) scales the gain for a measurement
-        known to be poor (motion-smeared markers): the prediction counts for more.
+        known to be poor (motion-smeared markers): the prediction counts for more. `centre` (world
+        point, metres; optional): the centre of the target the measurement comes from; with it the orbit
+        mode about that point is filtered with its own gain (module docstring, `_orbit_gains`).
         """
         Rm = world_from_camera[:3, :3]
         pm = world_from_camera[:3, 3]
@@ -99,17 +111,25 @@ class PoseFilter:
         self.noise2 = 0.9 * self.noise2 + 0.1 * min(m * m, 9.0 * self.noise2 + 1e-12)
         speed = float(np.linalg.norm(self.w) + np.linalg.norm(self.v) / d)
         fc = self.min_cutoff + self.beta * (speed + surprise / dt)
-        tau = 1.0 / (2.0 * math.pi * fc)
-        a = 1.0 / (1.0 + tau / dt)
-        if sigma is not None and m > 3.0 * sigma:
-            a = max(a, 1.0 - (3.0 * sigma / m) ** 2)
-        a *= min(max(float(weight), 0.0), 1.0)
-        # velocity gain from a capped alpha: one noisy frame must not fling the prediction (and with it
-        # the choice between a marker's two IPPE solutions) far off
-        av = min(a, self.max_velocity_alpha)
-        b = av * av / (2.0 - av)
-        self.p = pred[:3, 3] + a * e_p
-        self.R = _exp(a * e_r) @ pred[:3, :3]
+        a = self._gain(fc, dt, m, sigma, weight)
+        b = self._velocity_gain(a)
+        dp, dr, dv, dw = a * e_p, a * e_r, b * e_p, b * e_r
+        if centre is not None and self.n >= 1:
+            off = pred[:3, 3] - np.asarray(centre, dtype=np.float64)
+            dist = float(np.linalg.norm(off))
+            if dist > 1e-6:
+                u = off / dist
+                # the orbit mode's part of the innovation: the camera's move across the line of sight and
+                # the turn w_o = u x e_perp / dist that keeps the centre where it was in the image
+                e_perp = e_p - (e_p @ u) * u
+                w_o = np.cross(u, e_perp) / dist
+                ao, bo = self._orbit_gains(u, dist, dt, m, sigma, weight, surprise, a, b)
+                dp = a * (e_p - e_perp) + ao * e_perp
+                dr = a * (e_r - w_o) + ao * w_o
+                dv = b * (e_p - e_perp) + bo * e_perp
+                dw = b * (e_r - w_o) + bo * w_o
+        self.p = pred[:3, 3] + dp
+        self.R = _exp(dr) @ pred[:3, :3]
         self.n += 1
         if self.n == 1:
             # second measurement: start the velocity from the finite difference instead of from rest,
@@ -122,10 +142,45 @@ class PoseFilter:
             self.p = pred[:3, 3] + a0 * e_p
             self.R = _exp(a0 * e_r) @ pred[:3, :3]
         else:
-            self.v = self.v + (b / dt) * e_p
-            self.w = self.w + (b / dt) * e_r
+            self.v = self.v + dv / dt
+            self.w = self.w + dw / dt
         self.t = t
         return self.pose()
+
+    def _gain(self, fc: float, dt: float, m: float, sigma: float | None, weight: float) -> float:
+        """Position/orientation gain for cutoff `fc` (Hz) over `dt` (s), raised toward 1 - (3 sigma / m)^2
+        for an innovation `m` (rad) many sigmas large, scaled by the measurement's `weight`."""
+        a = 1.0 / (1.0 + 1.0 / (2.0 * math.pi * fc) / dt)
+        if sigma is not None and m > 3.0 * sigma:
+            a = max(a, 1.0 - (3.0 * sigma / m) ** 2)
+        return a * min(max(float(weight), 0.0), 1.0)
+
+    def _velocity_gain(self, a: float) -> float:
+        """Benedict-Bordner velocity gain from a capped alpha: one noisy frame must not fling the
+        prediction (and with it the choice between a marker's two IPPE solutions) far off."""
+        av = min(a, self.max_velocity_alpha)
+        return av * av / (2.0 - av)
+
+    def _orbit_gains(self, u: np.ndarray, dist: float, dt: float, m: float, sigma: float | None, weight: float,
+                     surprise: float, a: float, b: float) -> tuple[float, float]:
+        """(position, velocity) gains of the orbit mode about a centre `dist` metres away along `u`
+        (unit, from the centre to the camera).
+
+        Its cutoff rises with the orbit's own speed: the camera's velocity across the line of sight, as
+        the angle it sweeps about the centre plus the turn that goes with it (2 |v_perp| / dist, rad/s,
+        counted the way `speed` counts a move and a turn), and with the same surprise as the rest; never
+        above the rest's gains (a, b). In the first frames after a (re)start its velocity is unknown: the
+        gains are then at least those of a least-squares straight-line fit to the measurements so far
+        (2 (2k - 1) / (k (k + 1)) and 6 / (k (k + 1)) at the k-th measurement), capped at a and b, so
+        a camera already moving is caught up with as fast as before."""
+        v_perp = self.v - (self.v @ u) * u
+        fc = self.min_cutoff + self.beta * (2.0 * float(np.linalg.norm(v_perp)) / dist + surprise / dt)
+        ao = min(self._gain(fc, dt, m, sigma, weight), a)
+        bo = self._velocity_gain(ao)
+        k = self.n + 2   # this measurement's number since the restart (the first two started the state)
+        ao = max(ao, min(2.0 * (2 * k - 1) / (k * (k + 1)), a))
+        bo = max(bo, min(6.0 / (k * (k + 1)), b))
+        return ao, bo
 
     def pose(self) -> np.ndarray:
         T = np.eye(4)

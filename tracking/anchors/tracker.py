@@ -98,7 +98,7 @@ class AnchorTracker:
                  full_every: int = 10, track_markers: bool = True, outlier_px: float = 3.0, branch_decay: float = 0.8,
                  branch_switch: float = 6.0, smear_px: float = 10.0, smear_sharpness: float = 0.15,
                  cover_fraction: float = 0.2, cover_weight: float = 0.1, refit_weight: float = 0.3,
-                 new_anchor_gate: float = 0.5, unblur_px: float | None = 2.0,
+                 new_anchor_gate: float = 0.5, unblur_px: float | None = 2.0, lone_end_margin: float = 0.1,
                  **filter_params):
         if not anchors:
             raise ValueError("AnchorTracker needs at least one anchor (the session's anchors list is empty)")
@@ -115,6 +115,8 @@ class AnchorTracker:
         self.cover_fraction, self.cover_weight = float(cover_fraction), float(cover_weight)
         self.refit_weight = float(refit_weight)
         self.new_anchor_gate = float(new_anchor_gate)
+        self.lone_end_margin = float(lone_end_margin)
+        self.aruco.lone_end_margin = self.lone_end_margin
         self.cover_max_markers = 2
         self.cover_refit = True   # refit a covered lone marker's corners on its sides' uncovered parts
         self.refitted = 0         # markers so refitted this session (diagnostics, tests)
@@ -247,7 +249,10 @@ class AnchorTracker:
             res.refitted = bool(self._refit_now & set(sol.anchors))
             if res.refitted:
                 weight *= self.refit_weight
-            filt = self.filter.update(raw, t, depth, sigma, weight=weight)
+            # a pose on one square's four corners (a lone marker) shows the orbit mode about their centre
+            # far worse than the rest: the filter gives that mode its own, lower gain (filter.py)
+            centre = np.mean(sol.world, axis=0) if n <= 4 else None
+            filt = self.filter.update(raw, t, depth, sigma, weight=weight, centre=centre)
             self.trusted.update(sol.anchors)
             res.covered = bool(covered)
             res.raw_world_from_camera = raw
@@ -451,7 +456,7 @@ class AnchorTracker:
         # four corners (one dragged corner cannot pull a median of four far)
         start = start + np.median(quads - start, axis=1)[:, None, :]
         cell = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).min(axis=1) / bits
-        refined, ok = refine_squares(gray, start, cell, self.camera, consensus_px=0.35)
+        refined, ok = refine_squares(gray, start, cell, self.camera, consensus_px=0.35, end_margin=self.lone_end_margin)
         if not ok.all():
             return None
         near = np.linalg.norm(refined - quads, axis=2) <= np.maximum(1.5, 0.15 * cell)[:, None]

@@ -122,7 +122,7 @@ def _webcam(**kw) -> dict:
 
 
 # Tuning twins of the test recordings: the same kinds of webcam effects and motions, from other seeds
-# (scene 301-304, desk 401-404) and other geometry. They are tuning data: looked at freely while
+# (scene 301-307, desk 401-407) and other geometry. They are tuning data: looked at freely while
 # choosing parameters, so that the test recordings above never have to be.
 TUNING_TWINS: dict[str, dict] = {
     # A single 5 cm marker at ~0.42 m; fingertips come from the other side onto its white border.
@@ -149,6 +149,21 @@ TUNING_TWINS: dict[str, dict] = {
                        "elevation": 61, "shake": {"pos_mm": 1.6, "rot_deg": 0.28, "freq_hz": 1.6}},
         "effects": _webcam(occluder={"start": 0.5, "end": 2.1, "ramp": 0.5, "style": "border", "approach_deg": 100,
                                      "reach": 0.027, "offset": -0.011}),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
+    # A single 5.8 cm marker at ~0.44 m; a hand slides in from the right (the side neither twin above
+    # covers), its fingertips on the white border and the foremost ~2 mm onto the black edge near a
+    # corner, held there, then gone (the third hand twin, made for issue 13's border jitter).
+    "tune_hand_border_b": {
+        "name": "tune_hand_border_b", "seed": 307, "fps": 30, "duration": 3.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": [-0.065, 0.03, -0.0002, 0.0003, 0.0]},
+        "anchors": [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 29, "length": 0.058}],
+        "desk": {"size": [1.4, 1.1], "ppm": 2000, "seed": 407},
+        "trajectory": {"kind": "orbit", "azimuth_start": -62, "azimuth_end": -76, "distance": 0.44,
+                       "elevation": 61, "shake": {"pos_mm": 1.6, "rot_deg": 0.27, "freq_hz": 1.6}},
+        "effects": _webcam(occluder={"start": 0.55, "end": 2.35, "ramp": 0.55, "style": "border", "approach_deg": -6,
+                                     "reach": 0.0163, "offset": 0.0105}),
         "video": {"fourcc": "MJPG", "quality": 70},
         "supersample": 2,
     },
