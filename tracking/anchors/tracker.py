@@ -300,11 +300,11 @@ class AnchorTracker:
         seen it. u' is the point's own image velocity since the last frame (its detections in both
         frames), fitted as an affine field over the anchor's points: far less noisy than a velocity
         from two poses, whose tilt noise barely moves the image. That difference is the velocity half a
-        frame before the frame time; when the anchor's field was also fitted in the last frame, from at
-        least `deskew_extrapolate_min` points (fewer make the difference of two fields too noisy), the
-        change between the two fields carries it on to the frame time (the image acceleration of a
-        hand-held camera is what the half-frame lag otherwise leaves in the corners). First order in d;
-        points of an anchor not seen in the last frame are left as they are. Also remembers this frame's
+        frame before the point's row time; when the anchor's field was also fitted in the last frame, from
+        at least `deskew_extrapolate_min` points (fewer make the difference of two fields too noisy), the
+        change between the two fields carries it on to the middle of the stretch the point is moved over
+        (the image acceleration of a hand-held camera is what the lag otherwise leaves in the corners).
+        First order in d; points of an anchor not seen in the last frame are left as they are. Also remembers this frame's
         points and fields.
         """
         cam = self.camera
@@ -334,12 +334,14 @@ class AnchorTracker:
             vel_all = np.c_[img, np.ones(len(img))] @ A
             self._fields[ob.anchor] = (A, dt)
             before = self._prev_fields.get(ob.anchor)
-            if before is not None and seen.sum() >= self.deskew_extrapolate_min:
-                # the difference is the velocity half a frame ago (dt/2); the change from the last frame's
-                # difference, (dt + dt_before)/2 earlier, carries it on to the frame time
-                vel_before = np.c_[img, np.ones(len(img))] @ before[0]
-                vel_all = vel_all + dt / (dt + before[1]) * (vel_all - vel_before)
             d = cam.readout * ((img[:, 1] + 0.5) / cam.height - 0.5)
+            if before is not None and seen.sum() >= self.deskew_extrapolate_min:
+                # the difference is the velocity at t - dt/2 + d (both detections were read at the point's
+                # row, d after their frame time); the stretch the point is moved back over, from t + d to
+                # t, needs it at its middle, t + d/2: (dt - d)/2 later. The change from the last frame's
+                # difference, (dt + dt_before)/2 earlier, carries it on there.
+                vel_before = np.c_[img, np.ones(len(img))] @ before[0]
+                vel_all = vel_all + ((dt - d) / (dt + before[1]))[:, None] * (vel_all - vel_before)
             out.append(Observation(ob.anchor, ob.obj, img - vel_all * d[:, None], ob.groups, ob.markers,
                                    square=ob.square))
         return out
