@@ -59,8 +59,9 @@ class Tracks:
     pixels there (N,2) float32; `X` the world points they image (N,3) metres; `moved` how far each
     moved from the frame before, pixels (N,2), when they were followed into this one; `planar` (N,) bool,
     which of them were placed on the anchors' plane from a pose (seeds; the others are map points), None
-    for none; `velocity` (N,2) their image velocity in pixels/s as used to move them to the centre row's
-    time (see `deskew`), None when not known; `path_velocity` (N,2) pixels/s, their displacement over
+    for none; `velocity` (N,2) their measured image velocity in pixels/s as used to move them to the centre
+    row's time (see `deskew`), None when not measured (fresh seeds placed with the motion model's guess,
+    no rolling shutter); `path_velocity` (N,2) pixels/s, their displacement over
     the last frame interval divided by it (NaN rows where not followed), None when not known."""
 
     image: np.ndarray
@@ -98,12 +99,20 @@ def deskew(camera: Camera, xy: np.ndarray, velocity: np.ndarray | None) -> np.nd
     return xy - np.asarray(velocity, float).reshape(-1, 2) * row_offsets(camera, xy[:, 1])[:, None]
 
 
-def _quadratic_basis(xy: np.ndarray, centre: np.ndarray, scale: float) -> np.ndarray:
+MIN_FIELD_POINTS = 24   # points a quadratic image-velocity field (6 coefficients a component) is fitted to
+
+
+def _quadratic_basis(xy: np.ndarray, centre: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The terms (N,6) 1, x, y, x^2, xy, y^2 of pixels xy (N,2) taken about `centre` in units of `scale`
+    pixels, and their derivatives (N,6) by x and by y, per pixel."""
     x, y = ((np.asarray(xy, float).reshape(-1, 2) - centre) / scale).T
-    return np.c_[np.ones_like(x), x, y, x * x, x * y, y * y]
+    zero, one = np.zeros_like(x), np.ones_like(x)
+    return (np.c_[one, x, y, x * x, x * y, y * y], np.c_[zero, one, zero, 2 * x, y, zero] / scale,
+            np.c_[zero, zero, one, zero, x, 2 * y] / scale)
 
 
-def velocity_field(xy: np.ndarray, velocity: np.ndarray, at: np.ndarray, min_points: int = 24) -> np.ndarray | None:
+def velocity_field(xy: np.ndarray, velocity: np.ndarray, at: np.ndarray,
+                   min_points: int = MIN_FIELD_POINTS) -> np.ndarray | None:
     """The image velocity (M,2) pixels/s at pixels `at` (M,2), from a quadratic field (what a camera
     turning and moving over a plane gives, to first order) fitted to the velocities (N,2) of points at
     xy (N,2); None with fewer than `min_points` points."""
@@ -111,8 +120,8 @@ def velocity_field(xy: np.ndarray, velocity: np.ndarray, at: np.ndarray, min_poi
         return None
     xy = np.asarray(xy, float).reshape(-1, 2)
     centre, scale = xy.mean(axis=0), float(max(xy.std(), 1.0))
-    coef, *_ = np.linalg.lstsq(_quadratic_basis(xy, centre, scale), velocity, rcond=None)
-    return _quadratic_basis(at, centre, scale) @ coef
+    coef, *_ = np.linalg.lstsq(_quadratic_basis(xy, centre, scale)[0], velocity, rcond=None)
+    return _quadratic_basis(at, centre, scale)[0] @ coef
 
 
 def _row_time_velocity(camera: Camera, before: np.ndarray, now: np.ndarray, ok: np.ndarray, dt: float,
@@ -126,21 +135,13 @@ def _row_time_velocity(camera: Camera, before: np.ndarray, now: np.ndarray, ok: 
     velocity then, `before_velocity` (N,2), finite) are carried on by their own change of velocity
     instead, which holds the field's change across the image and in time alike (a pan turning round)."""
     v = (now - before) / dt
-    if ok.sum() < 24:
+    if ok.sum() < MIN_FIELD_POINTS:
         return v
-    scale = float(camera.K[0, 0])
-    c = camera.K[:2, 2]
-    mid = ((now[ok] + before[ok]) / 2 - c) / scale
-    x, y = mid[:, 0], mid[:, 1]
-    coef, *_ = np.linalg.lstsq(np.c_[np.ones_like(x), x, y, x * x, x * y, y * y], v[ok], rcond=None)
-    q = (now - c) / scale
-    x, y = q[:, 0], q[:, 1]
-    zero, one = np.zeros_like(x), np.ones_like(x)
-    # d(field)/dx and d(field)/dy at each point, per pixel
-    gx = np.c_[zero, one, zero, 2 * x, y, zero] @ coef / scale
-    gy = np.c_[zero, zero, one, zero, x, 2 * y] @ coef / scale
+    centre, scale = camera.K[:2, 2], float(camera.K[0, 0])
+    coef, *_ = np.linalg.lstsq(_quadratic_basis((now[ok] + before[ok]) / 2, centre, scale)[0], v[ok], rcond=None)
+    _, dx, dy = _quadratic_basis(now, centre, scale)
     shift = v * ((dt - row_offsets(camera, now[:, 1])) / 2)[:, None]   # from halfway along the path
-    out = v + shift[:, :1] * gx + shift[:, 1:] * gy
+    out = v + shift[:, :1] * (dx @ coef) + shift[:, 1:] * (dy @ coef)
     if before_velocity is not None:
         # the two path velocities are dt apart (the frame interval taken as steady); from the last one's
         # time (halfway along the path) to the middle of the deskew stretch is (dt + d) / 2
@@ -215,7 +216,8 @@ def seed_on_plane(camera: Camera, gray: np.ndarray, world_from_camera: np.ndarra
     """Tracks for the grey image `gray` taken at `world_from_camera`: the points of `keep` (if any,
     measured in this same image) plus up to n - len(keep) new corners (Shi-Tomasi), away from those,
     placed on the anchors' plane (marked `planar`). With a rolling shutter the new corners are moved to
-    the centre row's time first (see `_seed_velocity`; `later` = (the pose dt seconds on, dt))."""
+    the centre row's time first (see `_seed_velocity`; `later` = (the pose dt seconds on, dt)); a velocity
+    only guessed from `later` is not kept (`follow` places such seeds again once it is measured)."""
     xy = np.zeros((0, 2), np.float32) if keep is None else keep.xy
     X = np.zeros((0, 3)) if keep is None else keep.X
     planar = np.zeros(0, bool) if keep is None else keep.planar_mask()
@@ -260,13 +262,12 @@ def relift(camera: Camera, tracks: Tracks, world_from_camera: np.ndarray) -> Tra
 
 def _relift_first_followed(camera: Camera, tracks: Tracks, lifted_from: np.ndarray, path_velocity: np.ndarray,
                            ok: np.ndarray) -> np.ndarray:
-    """World points (N,3) of `tracks`, those of its plane seeds followed (`ok`) for the first time (no
-    path velocity yet) placed on the plane again from `lifted_from`, moved to the centre row's time by
-    the path velocity (N,2) pixels/s now measured."""
+    """World points (N,3) of `tracks`; when their image velocity was never measured (fresh seeds, placed
+    on the plane with the motion model's guess of it), those of the plane seeds now followed (`ok`) are
+    placed again from `lifted_from`, moved to the centre row's time by the path velocity (N,2) pixels/s
+    now measured."""
     first = tracks.planar_mask() & ok
-    if tracks.velocity is not None:
-        return tracks.X
-    if not first.any():
+    if tracks.velocity is not None or not first.any():
         return tracks.X
     Xn, good = lift_to_plane(camera, lifted_from, deskew(camera, tracks.xy[first], path_velocity[first]))
     X = tracks.X.copy()
