@@ -99,7 +99,7 @@ class AnchorTracker:
                  branch_switch: float = 6.0, smear_px: float = 10.0, smear_sharpness: float = 0.15,
                  cover_fraction: float = 0.2, cover_weight: float = 0.1, refit_weight: float = 0.3,
                  new_anchor_gate: float = 0.5, unblur_px: float | None = 2.0, lone_end_margin: float = 0.1,
-                 **filter_params):
+                 cover_relax_s: float = 0.2, **filter_params):
         if not anchors:
             raise ValueError("AnchorTracker needs at least one anchor (the session's anchors list is empty)")
         self.anchors = list(anchors)
@@ -117,6 +117,7 @@ class AnchorTracker:
         self.new_anchor_gate = float(new_anchor_gate)
         self.lone_end_margin = float(lone_end_margin)
         self.aruco.lone_end_margin = self.lone_end_margin
+        self.cover_relax_s = float(cover_relax_s)
         self.cover_max_markers = 2
         self.cover_refit = True   # refit a covered lone marker's corners on its sides' uncovered parts
         self.refitted = 0         # markers so refitted this session (diagnostics, tests)
@@ -146,6 +147,7 @@ class AnchorTracker:
         self._prev_fields: dict = {}
         self.branch_evidence = 0.0
         self._alternative = None
+        self._cover_last: tuple[float, float | None] = (1.0, None)   # (last cover weight, its time)
         self.tracked_keys: set[tuple[int, int]] = set()
         self.trusted: set[int] = set()   # anchors that have carried (or agreed with) the pose this session
 
@@ -176,6 +178,23 @@ class AnchorTracker:
             self._alternative = sols[other]
             return True
         return False
+
+    def _cover_relax(self, t: float, cover: float) -> float:
+        """This frame's cover weight (`cover`: cover_weight and/or refit_weight, 1 when neither applies),
+        relaxed back to 1 with time constant `cover_relax_s` after the last frame that had one.
+
+        The frames right after the cover check stops flagging a marker are not yet as good as free
+        ones (the fingertips leave over a few frames, first to the paper's edge, and their shadow later),
+        and the filter, which followed the covered measurements slowly, would otherwise be pulled to the
+        free ones at full gain in one step: the step spread over a few frames is a smaller frame-to-frame
+        change."""
+        if cover < 1.0:
+            self._cover_last = (cover, t)
+            return cover
+        last, t_last = self._cover_last
+        if t_last is None or self.cover_relax_s <= 0 or t <= t_last:
+            return 1.0
+        return float(1.0 - (1.0 - last) * np.exp(-(t - t_last) / self.cover_relax_s))
 
     def _smear_weight(self, gray, sol, raw) -> float:
         """Weight (0.04..1) of this frame's measurement in the filter: below 1 when the markers moved
@@ -245,10 +264,9 @@ class AnchorTracker:
             lever = np.sqrt(1.0 + (self.camera.fx / extent) ** 2)
             sigma = 2.0 * px_sigma / extent * lever / np.sqrt(max(n / 4.0, 1.0))
             covered = covered and bool(covered & set(sol.anchors))
-            weight = self._smear_weight(gray, sol, raw) * (self.cover_weight if covered else 1.0)
             res.refitted = bool(self._refit_now & set(sol.anchors))
-            if res.refitted:
-                weight *= self.refit_weight
+            cover = (self.cover_weight if covered else 1.0) * (self.refit_weight if res.refitted else 1.0)
+            weight = self._smear_weight(gray, sol, raw) * self._cover_relax(t, cover)
             # a pose on one square's four corners (a lone marker) shows the orbit mode about their centre
             # far worse than the rest: the filter gives that mode its own, lower gain (filter.py)
             centre = np.mean(sol.world, axis=0) if n <= 4 else None
