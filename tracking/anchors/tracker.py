@@ -92,6 +92,12 @@ class AnchorTracker:
     is used only if its corners lie within `new_anchor_gate` times its own image size (pixels, the
     geometric mean of its bounding box's sides; at least 20 px) of where the reference puts them; it
     becomes trusted once used. 0 turns the check off.
+    lone_end_margin: a lone marker's sides are edge-fitted from this fraction of their length to 1 minus it
+    (boards: 0.2), weak steps left out (edges.refine_squares): its four corners carry the whole pose, and
+    lines fitted over more of the sides pin them better. cover_relax_s: after the last covered or refitted
+    frame, the cover's weight relaxes back to 1 with this time constant (seconds; `_cover_relax`).
+    A pose on a lone marker's four corners also tells the filter their centre: the orbit mode about it,
+    which such a pose shows worst, gets its own gain there (filter.py).
     """
 
     def __init__(self, anchors: list[AnchorSpec], camera: Camera, filter: bool = True, *, roi: bool = True,
