@@ -20,7 +20,8 @@ import numpy as np
 
 from tracking.camera import Camera
 
-STRONG_STEP = 0.75   # with consensus_px or strong_only: edge samples below this fraction of the marker's typical step are left out
+# with consensus_px or strong_only: edge samples below this fraction of the marker's typical step are left out
+STRONG_STEP = 0.75
 
 
 def _distort(camera: Camera, und: np.ndarray) -> np.ndarray:
