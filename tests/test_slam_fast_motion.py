@@ -231,16 +231,19 @@ def test_a_smeared_board_is_shown_through_the_anchors_filter():
     assert Tracker._anchor_output(lone)[0, 3] == 0.003
 
 
-@pytest.mark.parametrize("name", ["tune_fast_pan", "tune_fast_pan_b"])
+@pytest.mark.parametrize("name", ["tune_fast_pan", "tune_fast_pan_b", "tune_fast_pan_c", "tune_fast_pan_d"])
 def test_flow_carries_a_rolling_shutter_pan_between_the_boards_visits(name):
     """Fast pans read out over 30 ms: between the board's visits the flow carries the pose. Fitted as if the
     whole frame were seen at once, each frame's shear moved the seeds placed on the plane and the pose by
     centimetres (median 14.7 / 8.1 mm, max 29 / 20 mm before); a board smeared by the pan whose corners fit
-    it poorly was taken over the flow at its return. Measured now: median 2.7 / 2.2 mm, max 8.2 / 4.2 mm."""
+    it poorly was taken over the flow at its return. On _c three markers in a row at the image edge fitted
+    well and read 22 mm off (max 33 mm), on _d one marker at the edge started the pose 51 mm off: a board
+    seen in part (`Tracker._partial_view`) neither starts the pose nor beats the flow when smeared.
+    Measured now: median 2.7 / 2.2 / 3.8 / 2.8 mm, max 8.2 / 4.2 / 6.8 / 9.6 mm."""
     frames, session = recording(name)
     with Tracker(session.camera, session.anchors, threaded=False) as tr:
         r = run_tracker(tr, frames)
     err = r["errors"][np.isfinite(r["errors"])]
     assert "slam" in r["states"]
-    assert np.median(err) < 0.004
+    assert np.median(err) < 0.005
     assert err.max() < 0.013

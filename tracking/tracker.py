@@ -61,13 +61,17 @@ from tracking.slam.fusion import PoseBlender, fuse_pose
 from tracking.slam.map import Map
 from tracking.slam.mapping import KeyframeRequest, LocalMapper
 from tracking.slam.relocalise import relocalise
-from tracking.slam.tracking import MotionModel, match_by_projection, plausible, pnp_ransac, refine_pose
+from tracking.slam.tracking import (MotionModel, match_by_projection, plausible, pnp_ransac, position_spread,
+                                    refine_pose)
 
 MIN_SIDE = 48  # pixels: smaller frames carry nothing trackable
 MAX_TRACKS = 200  # keypoints followed by optical flow between full frames
 # pixels: RMS reprojection error up to which a board's (12+ corners) own pose is shown as measured; sharp
 # boards fit to 0.1-0.3 px, boards smeared by a fast pan to 0.6-1 px
 PRECISE_RMS_PX = 0.6
+# the most the camera position's spread per corner may grow over that of the anchors' whole outline before
+# the anchors seen count as a partial view (they do not start the pose, and lose to the flow when smeared)
+PARTIAL_VIEW = 1.8
 FLOW_SEEDS = 300  # points followed by optical flow when the anchors and the map both fail
 
 
@@ -462,7 +466,8 @@ class Tracker:
                     return self._flow_result(got, t, t0, int(ar.markers))
 
         corners_w, corners_uv, markers = self._anchor_points(ar)
-        if len(corners_w) and (self._lost > 0 or self.motion.last is None) and self._too_smeared_to_start(ar, gray):
+        if (len(corners_w) and (self._lost > 0 or self.motion.last is None)
+                and (self._too_smeared_to_start(ar, gray) or self._partial_view(ar))):
             corners_w, corners_uv = corners_w[:0], corners_uv[:0]   # the map may still relocalise
         pred = self.motion.predict(t)
         ids, X, D = self.map.arrays()
@@ -683,7 +688,7 @@ class Tracker:
         seen = np.asarray(ar.image_points, float).reshape(-1, 2)
         if not edge_sharpness(gray, seen, motion) < self.smear_sharpness:
             return False   # sharp (or unmeasurable) markers are measured where they are
-        if not self._fits_well(ar):
+        if not self._fits_well(ar) or self._partial_view(ar):
             # a smeared board's corners can sit within a pixel of the flow's and still tilt its pose by
             # a centimetre; a pose from a few markers' or from poorly fitting corners loses to the flow
             return True
@@ -786,6 +791,24 @@ class Tracker:
         """The anchors' pose this frame rests on 12 or more corners, none partly covered (a board: the output
         fades onto it over `precise_blend_frames`)."""
         return ar is not None and not ar.covered and len(ar.object_points) >= 12
+
+    def _partial_view(self, ar) -> bool:
+        """Whether the anchors' corners seen this frame hold the camera position much worse than the anchors
+        they belong to would whole: the position's spread per corner (`position_spread`, times the square
+        root of the corner count) over that of the anchors' whole outline at the same pose exceeds
+        `PARTIAL_VIEW`. A board's last few markers at the image edge read centimetres off (their tilt
+        and the camera's shift trade off); a whole board is about 1. Only boards can be seen in part."""
+        pose = ar.raw_world_from_camera
+        models = [self._anchors.models[i] for i in ar.anchors_seen]
+        if pose is None or not any(len(m.markers) > 1 for m in models):
+            return False   # markers and QR codes are seen whole or not at all
+        pose = np.asarray(pose, float)
+        seen = np.asarray(ar.object_points, float).reshape(-1, 3)
+        whole = np.concatenate([m.to_world(m.outline()) for m in models])
+        spread_seen = position_spread(self.K, pose, seen, 1.0) * np.sqrt(len(seen))
+        spread_whole = position_spread(self.K, pose, whole, 1.0) * np.sqrt(len(whole))
+        # an outline partly behind the camera (inf) says nothing: not partial
+        return bool(np.isfinite(spread_whole) and spread_seen > PARTIAL_VIEW * spread_whole)
 
     @staticmethod
     def _fits_well(ar) -> bool:

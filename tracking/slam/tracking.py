@@ -38,6 +38,48 @@ def project(K: np.ndarray, cam_from_world: np.ndarray, X: np.ndarray) -> tuple[n
     return np.stack([u, v], axis=1), z
 
 
+def _pose_jacobian(fx: float, fy: float, x: np.ndarray, y: np.ndarray, iz: np.ndarray) -> np.ndarray:
+    """d pixels / d xi (2N, 6) of points at normalised image coordinates x, y (N,) and inverse depths iz
+    (N,), for a left perturbation xi = (omega, v) of camera_from_world: the projection's derivative times
+    d Xc / d xi = [-[Xc]x | I], written out per row (no per-point matrix products)."""
+    J = np.empty((x.size, 2, 6))
+    J[:, 0, 0] = -fx * x * y
+    J[:, 0, 1] = fx * (1.0 + x * x)
+    J[:, 0, 2] = -fx * y
+    J[:, 0, 3] = fx * iz
+    J[:, 0, 4] = 0.0
+    J[:, 0, 5] = -fx * x * iz
+    J[:, 1, 0] = -fy * (1.0 + y * y)
+    J[:, 1, 1] = fy * x * y
+    J[:, 1, 2] = fy * x
+    J[:, 1, 3] = 0.0
+    J[:, 1, 4] = fy * iz
+    J[:, 1, 5] = -fy * y * iz
+    return J.reshape(-1, 6)
+
+
+def position_spread(K: np.ndarray, world_from_camera: np.ndarray, X: np.ndarray, pixel_sigma: float) -> float:
+    """Standard deviation (metres, summed over the three axes) of the camera position a pose fitted to world
+    points X (N,3) would have, their pixels measured to `pixel_sigma` px each axis: the translation part of
+    the fit's covariance, pixel_sigma^2 (J^T J)^-1. Large when the points hold the position poorly (a few
+    markers in a row at the image edge: their tilt and the camera's shift trade off); inf below 3 points."""
+    X = np.asarray(X, float).reshape(-1, 3)
+    if len(X) < 3:
+        return float("inf")
+    T = invert(world_from_camera)
+    Xc = X @ T[:3, :3].T + T[:3, 3]
+    if np.any(Xc[:, 2] <= 1e-6):
+        return float("inf")
+    iz = 1.0 / Xc[:, 2]
+    J = _pose_jacobian(K[0, 0], K[1, 1], Xc[:, 0] * iz, Xc[:, 1] * iz, iz)
+    try:
+        cov = np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        return float("inf")
+    # the camera position is -R^T t; a left perturbation moves it by -R^T v: the same spread as v
+    return float(pixel_sigma * np.sqrt(max(np.trace(cov[3:, 3:]), 0.0)))
+
+
 def refine_pose(K: np.ndarray, world_from_camera: np.ndarray, X: np.ndarray, uv: np.ndarray,
                 weights: np.ndarray | None = None, rounds: int = 2, iterations: int = 6,
                 huber: float = np.sqrt(CHI2_2D), sigma2: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
@@ -73,22 +115,7 @@ def refine_pose(K: np.ndarray, world_from_camera: np.ndarray, X: np.ndarray, uv:
             r[:, 1] = fy * y + K[1, 2] - uv[a, 1]
             e = np.sqrt((r * r).sum(1) / s2[a])
             hw = w[a] * np.where(e <= huber, 1.0, huber / np.maximum(e, 1e-12))
-            # d proj / d xi for a left perturbation (omega, v) of camera_from_world: the projection's
-            # derivative times d Xc / d xi = [-[Xc]x | I], written out per row (no per-point matrix products)
-            J = np.empty((a.size, 2, 6))
-            J[:, 0, 0] = -fx * x * y
-            J[:, 0, 1] = fx * (1.0 + x * x)
-            J[:, 0, 2] = -fx * y
-            J[:, 0, 3] = fx * iz
-            J[:, 0, 4] = 0.0
-            J[:, 0, 5] = -fx * x * iz
-            J[:, 1, 0] = -fy * (1.0 + y * y)
-            J[:, 1, 1] = fy * x * y
-            J[:, 1, 2] = fy * x
-            J[:, 1, 3] = 0.0
-            J[:, 1, 4] = fy * iz
-            J[:, 1, 5] = -fy * y * iz
-            J = J.reshape(-1, 6)  # (2n, 6)
+            J = _pose_jacobian(fx, fy, x, y, iz)
             JW = J * np.repeat(hw, 2)[:, None]
             H = JW.T @ J
             g = JW.T @ r.reshape(-1)

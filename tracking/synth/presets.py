@@ -220,6 +220,34 @@ TUNING_TWINS: dict[str, dict] = {
         "video": {"fourcc": "MJPG", "quality": 70},
         "supersample": 2,
     },
+    # Fast pans over a 4x3 GridBoard (3.6 cm markers): the third fast-pan twin (made in stop 14), where the
+    # board leaves with three markers in a row at the image edge that fit well and read 2 cm off.
+    "tune_fast_pan_c": {
+        "name": "tune_fast_pan_c", "seed": 308, "fps": 30, "duration": 2.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 61, "dist": [-0.075, 0.035, -0.0004, 0.0004, 0.0]},
+        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
+                     "marker_length": 0.036, "separation": 0.008, "first_id": 0}],
+        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": 408},
+        "trajectory": {"kind": "pan", "azimuth": -80, "distance": 0.47, "elevation": 61, "pan_deg": 20,
+                       "cycles": 1.25, "shake": {"pos_mm": 2.4, "rot_deg": 0.5, "freq_hz": 2.7}},
+        "effects": _webcam(motion_blur=0.6, blur_samples=7, rolling_shutter=0.03),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
+    # Fast pans over a 4x3 GridBoard (3.4 cm markers), 1.3 cycles: the fourth fast-pan twin (stop 14), whose
+    # first sighting is one marker at the image edge, sharp enough to start the pose 5 cm off.
+    "tune_fast_pan_d": {
+        "name": "tune_fast_pan_d", "seed": 309, "fps": 30, "duration": 2.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 63, "dist": [-0.07, 0.03, 0.0003, 0.0002, 0.0]},
+        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
+                     "marker_length": 0.034, "separation": 0.009, "first_id": 12}],
+        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": 409},
+        "trajectory": {"kind": "pan", "azimuth": -100, "distance": 0.49, "elevation": 59, "pan_deg": 19,
+                       "cycles": 1.3, "shake": {"pos_mm": 2.6, "rot_deg": 0.5, "freq_hz": 2.4}},
+        "effects": _webcam(motion_blur=0.6, blur_samples=7, rolling_shutter=0.03),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
 }
 PRESETS.update(TUNING_TWINS)
 
