@@ -154,6 +154,7 @@ class AnchorTracker:
         self.branch_evidence = 0.0
         self._alternative = None
         self._cover_last: tuple[float, float | None] = (1.0, None)   # (last cover weight, its time)
+        self._state_sigma = float("inf")   # the best measurement noise (radians) the filter's state rests on
         self.tracked_keys: set[tuple[int, int]] = set()
         self.trusted: set[int] = set()   # anchors that have carried (or agreed with) the pose this session
 
@@ -272,11 +273,19 @@ class AnchorTracker:
             covered = covered and bool(covered & set(sol.anchors))
             res.refitted = bool(self._refit_now & set(sol.anchors))
             cover = (self.cover_weight if covered else 1.0) * (self.refit_weight if res.refitted else 1.0)
-            weight = self._smear_weight(gray, sol, raw) * self._cover_relax(t, cover)
+            smear = self._smear_weight(gray, sol, raw)
+            if smear < 1.0 and 2.0 * sigma < self._state_sigma:
+                # the filter's state rests on measurements far noisier than this one (a board's few markers
+                # at the image edge as it came back into view): smeared or not, this one counts in full
+                smear = 1.0
+            weight = smear * self._cover_relax(t, cover)
             # a pose on one square's four corners (a lone marker) shows the orbit mode about their centre
             # far worse than the rest: the filter gives that mode its own, lower gain (filter.py)
             centre = np.mean(sol.world, axis=0) if n <= 4 else None
             filt = self.filter.update(raw, t, depth, sigma, weight=weight, centre=centre)
+            # (a restart leaves the state on this measurement alone; a down-weighted one counts as noisier)
+            self._state_sigma = (sigma if self.filter.n == 0
+                                 else min(self._state_sigma, sigma / max(weight, 1e-3)))
             self.trusted.update(sol.anchors)
             res.covered = bool(covered)
             res.raw_world_from_camera = raw
