@@ -123,7 +123,7 @@ def test_set_is_small_and_covers_the_cases():
     def size(names):
         return sum(p.stat().st_size for n in names for p in (RECORDINGS / n).rglob("*") if p.is_file())
 
-    assert size(TUNING) < 38e6, f"the tuning recordings hold {size(TUNING) / 1e6:.1f} MB; the budget is 38 MB"
+    assert size(TUNING) < 40e6, f"the tuning recordings hold {size(TUNING) / 1e6:.1f} MB; the budget is 40 MB"
     assert size(TEST) < 12e6, f"the test recordings hold {size(TEST) / 1e6:.1f} MB; the budget is 12 MB"
     sizes = {(load_session(RECORDINGS / n).camera.width, load_session(RECORDINGS / n).camera.height) for n in PRESETS}
     assert {(640, 480), (1280, 720)} <= sizes

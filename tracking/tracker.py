@@ -900,8 +900,11 @@ class Tracker:
         precise anchors, or precise anchors arriving during a fade, fades over `precise_blend_frames`."""
         changed = source != self._source
         self._source = source
-        # after lost frames nothing was shown: the new pose is taken as it is, not faded from a stale one
-        if self._last_out is not None and pred is not None and self._lost == 0 and changed:
+        # after lost frames nothing was shown: the new pose is taken as it is, not faded from a stale one;
+        # nor is it faded while the velocity rests on a single frame difference (just started: a first pose
+        # off by centimetres makes the predicted target as far off as the step it is meant to hide)
+        if (self._last_out is not None and pred is not None and self._lost == 0 and changed
+                and self.motion.steps >= 2):
             # where the output would have gone: the last output moved by the predicted camera motion
             target = self._last_out @ np.linalg.inv(self.motion.last) @ pred
             # onto precise anchors the fade starts on this very frame: they are the better pose

@@ -209,9 +209,10 @@ class MotionModel:
     last: np.ndarray | None = None
     last_t: float | None = None
     velocity: np.ndarray | None = None   # (6,) rotvec rad/s (camera frame), translation m/s (world)
+    steps: int = 0   # frame-to-frame differences the velocity rests on (1: a single one, start-up noise and all)
 
     def reset(self) -> None:
-        self.last, self.last_t, self.velocity = None, None, None
+        self.last, self.last_t, self.velocity, self.steps = None, None, None, 0
 
     def predict(self, t: float) -> np.ndarray | None:
         if self.last is None:
@@ -231,13 +232,14 @@ class MotionModel:
             rel = self.last[:3, :3].T @ pose[:3, :3]
             v = np.concatenate([Rotation.from_matrix(rel).as_rotvec() / dt, (pose[:3, 3] - self.last[:3, 3]) / dt])
             self.velocity = v if self.velocity is None else smoothing * v + (1 - smoothing) * self.velocity
+            self.steps += 1
         else:
-            self.velocity = None
+            self.velocity, self.steps = None, 0
         self.last, self.last_t = pose.copy(), t
 
     def lose(self) -> None:
         """Forget the velocity after a failed frame, keep the last pose for gating."""
-        self.velocity = None
+        self.velocity, self.steps = None, 0
 
 
 def plausible(pose: np.ndarray, reference: np.ndarray, dt: float, max_speed: float = 2.0,

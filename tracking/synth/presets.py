@@ -248,6 +248,20 @@ TUNING_TWINS: dict[str, dict] = {
         "video": {"fourcc": "MJPG", "quality": 70},
         "supersample": 2,
     },
+    # Fast pans over a 4x3 GridBoard (3.5 cm markers), 1.2 cycles: the fifth fast-pan twin (stop 14), whose pose
+    # starts on four smeared markers 18 mm off and whose velocity then rests on that start.
+    "tune_fast_pan_e": {
+        "name": "tune_fast_pan_e", "seed": 310, "fps": 30, "duration": 2.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": 60, "dist": [-0.085, 0.045, 0.0004, -0.0003, 0.0]},
+        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
+                     "marker_length": 0.035, "separation": 0.008, "first_id": 24}],
+        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": 410},
+        "trajectory": {"kind": "pan", "azimuth": -110, "distance": 0.48, "elevation": 62, "pan_deg": 21,
+                       "cycles": 1.2, "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.5}},
+        "effects": _webcam(motion_blur=0.6, blur_samples=7, rolling_shutter=0.03),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    },
 }
 PRESETS.update(TUNING_TWINS)
 
