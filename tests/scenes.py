@@ -177,3 +177,20 @@ def bundled_recording(name: str, frames: slice | None = None):
     if not (folder / "groundtruth.tum").is_file():
         pytest.fail(f"recordings/{name} with groundtruth.tum is part of the repository and must exist")
     return load_recording(folder, frames)
+
+
+# a hand's skin as BGR (0-255), for fingers painted over markers
+SKIN_BGR = np.array([120.0, 150.0, 205.0])
+
+
+def marker_side(quad, side: int):
+    """The side `side` (corners side, side+1) of a marker's image quad (4,2 pixels): (its middle (2,), the unit
+    vector out of the marker across it, the unit vector along it toward corner side+1, its length in
+    pixels, a cell's length: a sixth of it, the cell count across a 4x4 ArUco marker with its border)."""
+    quad = np.asarray(quad, float)
+    a, b = quad[side], quad[(side + 1) % 4]
+    mid = (a + b) / 2
+    out = mid - quad.mean(axis=0)
+    out /= np.linalg.norm(out)
+    length = float(np.linalg.norm(b - a))
+    return mid, out, (b - a) / length, length, length / 6

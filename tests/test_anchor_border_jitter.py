@@ -14,9 +14,8 @@ import pytest
 from tracking.anchors import AnchorTracker
 from tracking.anchors.model import build_models
 from tracking.poses import invert
-from scenes import render_sequence, scene_dict
+from scenes import SKIN_BGR, marker_side, render_sequence, scene_dict
 
-SKIN_BGR = np.array([120.0, 150.0, 205.0])
 MARKER = 0.058   # m, DICT_4X4_50 id 3 (scene_dict's marker)
 COVER_FROM = 24  # frame from which the fingers rest on the border
 
@@ -35,14 +34,7 @@ def paint_resting_hand(img, quad, side=1):
     """Four rounded fingers from outside side `side` (corners side, side+1) of `quad`, their tips on the
     white margin; the one nearest corner side+1 reaches a third of a cell (of 6 across) onto the black
     border a fifth of the side from that corner. Anti-aliased at 4x, a soft shadow beside them."""
-    a, b = quad[side], quad[(side + 1) % 4]
-    centre = quad.mean(axis=0)
-    mid = (a + b) / 2
-    out = mid - centre
-    out /= np.linalg.norm(out)
-    length = np.linalg.norm(b - a)
-    along = (b - a) / length
-    cell = length / 6
+    mid, out, along, length, cell = marker_side(quad, side)
     s = 4
     mask = np.zeros((img.shape[0] * s, img.shape[1] * s), np.uint8)
 

@@ -13,10 +13,9 @@ from tracking.anchors import AnchorTracker
 from tracking.anchors.model import build_models
 from tracking.anchors.occlusion import covered_fraction, is_covered
 from tracking.session import parse_anchors
-from scenes import render_sequence, scene_dict
+from scenes import SKIN_BGR, marker_side, render_sequence, scene_dict
 from tracking.tracker import Tracker
 
-SKIN_BGR = np.array([120.0, 150.0, 205.0])
 MARKER = 0.06   # m, DICT_4X4_50 id 3 (scene_dict's marker)
 
 
@@ -25,14 +24,7 @@ def paint_fingers(img, quad, side, reach_cells, shade=0.85, shift=0.0):
     (4,2 pixels), fingertips `reach_cells` cells (of 6 across the marker) outside the black border
     (negative: over it), the hand moved `shift` of the side's length along it (toward corner side+1).
     Anti-aliased at 4x; returns a new BGR image."""
-    a, b = quad[side], quad[(side + 1) % 4]
-    centre = quad.mean(axis=0)
-    mid = (a + b) / 2
-    out = mid - centre
-    out /= np.linalg.norm(out)
-    length = np.linalg.norm(b - a)
-    along = (b - a) / length
-    cell = length / 6
+    mid, out, along, length, cell = marker_side(quad, side)
     tip = mid + out * cell * reach_cells + along * shift * length
     s = 4
     mask = np.zeros((img.shape[0] * s, img.shape[1] * s), np.uint8)

@@ -124,6 +124,26 @@ def _webcam(**kw) -> dict:
 # Tuning twins of the test recordings: the same kinds of webcam effects and motions, from other seeds
 # (scene 301-307, desk 401-407) and other geometry. They are tuning data: looked at freely while
 # choosing parameters, so that the test recordings above never have to be.
+def _fast_pan_twin(name: str, seed: int, desk_seed: int, hfov_deg: float, dist: list[float],
+                   board: tuple[int, int, float, float, int], pan: dict) -> dict:
+    """A fast-pan tuning twin: 2 s at 30 fps, 640x480, over a GridBoard of DICT_4X4_50 markers
+    (markers_x, markers_y, marker_length m, separation m, first_id), on a 2 m x 1.6 m desk; webcam effects
+    with motion blur over 60 % of the frame interval and a 30 ms rolling shutter. `pan`: the trajectory's
+    pan parameters (trajectory.py)."""
+    nx, ny, length, sep, first = board
+    return {
+        "name": name, "seed": seed, "fps": 30, "duration": 2.0,
+        "camera": {"width": 640, "height": 480, "hfov_deg": hfov_deg, "dist": dist},
+        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": nx, "markers_y": ny,
+                     "marker_length": length, "separation": sep, "first_id": first}],
+        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": desk_seed},
+        "trajectory": {"kind": "pan", **pan},
+        "effects": _webcam(motion_blur=0.6, blur_samples=7, rolling_shutter=0.03),
+        "video": {"fourcc": "MJPG", "quality": 70},
+        "supersample": 2,
+    }
+
+
 TUNING_TWINS: dict[str, dict] = {
     # A single 5 cm marker at ~0.42 m; fingertips come from the other side onto its white border.
     "tune_hand_border": {
@@ -195,73 +215,38 @@ TUNING_TWINS: dict[str, dict] = {
         "supersample": 2,
     },
     # Fast pans over a 5x3 GridBoard: motion blur along the true motion, rolling-shutter skew.
-    "tune_fast_pan": {
-        "name": "tune_fast_pan", "seed": 304, "fps": 30, "duration": 2.0,
-        "camera": {"width": 640, "height": 480, "hfov_deg": 61, "dist": [-0.07, 0.03, -0.0004, 0.0005, 0.0]},
-        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 5, "markers_y": 3,
-                     "marker_length": 0.032, "separation": 0.008, "first_id": 20}],
-        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": 404},
-        "trajectory": {"kind": "pan", "azimuth": -85, "distance": 0.5, "elevation": 58, "pan_deg": 22,
-                       "cycles": 1.5, "shake": {"pos_mm": 2.8, "rot_deg": 0.55, "freq_hz": 2.8}},
-        "effects": _webcam(motion_blur=0.6, blur_samples=7, rolling_shutter=0.03),
-        "video": {"fourcc": "MJPG", "quality": 70},
-        "supersample": 2,
-    },
+    "tune_fast_pan": _fast_pan_twin(
+        "tune_fast_pan", 304, 404, hfov_deg=61, dist=[-0.07, 0.03, -0.0004, 0.0005, 0.0],
+        board=(5, 3, 0.032, 0.008, 20),
+        pan={"azimuth": -85, "distance": 0.5, "elevation": 58, "pan_deg": 22,
+             "cycles": 1.5, "shake": {"pos_mm": 2.8, "rot_deg": 0.55, "freq_hz": 2.8}}),
     # Fast pans over a 4x3 GridBoard (3.4 cm markers), 1.25 cycles: the second fast-pan twin (made in stop 13).
-    "tune_fast_pan_b": {
-        "name": "tune_fast_pan_b", "seed": 306, "fps": 30, "duration": 2.0,
-        "camera": {"width": 640, "height": 480, "hfov_deg": 60, "dist": [-0.06, 0.035, 0.0003, -0.0004, 0.0]},
-        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
-                     "marker_length": 0.034, "separation": 0.008, "first_id": 35}],
-        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": 406},
-        "trajectory": {"kind": "pan", "azimuth": -90, "distance": 0.49, "elevation": 59, "pan_deg": 21,
-                       "cycles": 1.25, "shake": {"pos_mm": 2.6, "rot_deg": 0.5, "freq_hz": 2.6}},
-        "effects": _webcam(motion_blur=0.6, blur_samples=7, rolling_shutter=0.03),
-        "video": {"fourcc": "MJPG", "quality": 70},
-        "supersample": 2,
-    },
+    "tune_fast_pan_b": _fast_pan_twin(
+        "tune_fast_pan_b", 306, 406, hfov_deg=60, dist=[-0.06, 0.035, 0.0003, -0.0004, 0.0],
+        board=(4, 3, 0.034, 0.008, 35),
+        pan={"azimuth": -90, "distance": 0.49, "elevation": 59, "pan_deg": 21,
+             "cycles": 1.25, "shake": {"pos_mm": 2.6, "rot_deg": 0.5, "freq_hz": 2.6}}),
     # Fast pans over a 4x3 GridBoard (3.6 cm markers): the third fast-pan twin (made in stop 14), where the
     # board leaves with three markers in a row at the image edge that fit well and read 2 cm off.
-    "tune_fast_pan_c": {
-        "name": "tune_fast_pan_c", "seed": 308, "fps": 30, "duration": 2.0,
-        "camera": {"width": 640, "height": 480, "hfov_deg": 61, "dist": [-0.075, 0.035, -0.0004, 0.0004, 0.0]},
-        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
-                     "marker_length": 0.036, "separation": 0.008, "first_id": 0}],
-        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": 408},
-        "trajectory": {"kind": "pan", "azimuth": -80, "distance": 0.47, "elevation": 61, "pan_deg": 20,
-                       "cycles": 1.25, "shake": {"pos_mm": 2.4, "rot_deg": 0.5, "freq_hz": 2.7}},
-        "effects": _webcam(motion_blur=0.6, blur_samples=7, rolling_shutter=0.03),
-        "video": {"fourcc": "MJPG", "quality": 70},
-        "supersample": 2,
-    },
+    "tune_fast_pan_c": _fast_pan_twin(
+        "tune_fast_pan_c", 308, 408, hfov_deg=61, dist=[-0.075, 0.035, -0.0004, 0.0004, 0.0],
+        board=(4, 3, 0.036, 0.008, 0),
+        pan={"azimuth": -80, "distance": 0.47, "elevation": 61, "pan_deg": 20,
+             "cycles": 1.25, "shake": {"pos_mm": 2.4, "rot_deg": 0.5, "freq_hz": 2.7}}),
     # Fast pans over a 4x3 GridBoard (3.4 cm markers), 1.3 cycles: the fourth fast-pan twin (stop 14), whose
     # first sighting is one marker at the image edge, sharp enough to start the pose 5 cm off.
-    "tune_fast_pan_d": {
-        "name": "tune_fast_pan_d", "seed": 309, "fps": 30, "duration": 2.0,
-        "camera": {"width": 640, "height": 480, "hfov_deg": 63, "dist": [-0.07, 0.03, 0.0003, 0.0002, 0.0]},
-        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
-                     "marker_length": 0.034, "separation": 0.009, "first_id": 12}],
-        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": 409},
-        "trajectory": {"kind": "pan", "azimuth": -100, "distance": 0.49, "elevation": 59, "pan_deg": 19,
-                       "cycles": 1.3, "shake": {"pos_mm": 2.6, "rot_deg": 0.5, "freq_hz": 2.4}},
-        "effects": _webcam(motion_blur=0.6, blur_samples=7, rolling_shutter=0.03),
-        "video": {"fourcc": "MJPG", "quality": 70},
-        "supersample": 2,
-    },
+    "tune_fast_pan_d": _fast_pan_twin(
+        "tune_fast_pan_d", 309, 409, hfov_deg=63, dist=[-0.07, 0.03, 0.0003, 0.0002, 0.0],
+        board=(4, 3, 0.034, 0.009, 12),
+        pan={"azimuth": -100, "distance": 0.49, "elevation": 59, "pan_deg": 19,
+             "cycles": 1.3, "shake": {"pos_mm": 2.6, "rot_deg": 0.5, "freq_hz": 2.4}}),
     # Fast pans over a 4x3 GridBoard (3.5 cm markers), 1.2 cycles: the fifth fast-pan twin (stop 14), whose pose
     # starts on four smeared markers 18 mm off and whose velocity then rests on that start.
-    "tune_fast_pan_e": {
-        "name": "tune_fast_pan_e", "seed": 310, "fps": 30, "duration": 2.0,
-        "camera": {"width": 640, "height": 480, "hfov_deg": 60, "dist": [-0.085, 0.045, 0.0004, -0.0003, 0.0]},
-        "anchors": [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
-                     "marker_length": 0.035, "separation": 0.008, "first_id": 24}],
-        "desk": {"size": [2.0, 1.6], "ppm": 1600, "seed": 410},
-        "trajectory": {"kind": "pan", "azimuth": -110, "distance": 0.48, "elevation": 62, "pan_deg": 21,
-                       "cycles": 1.2, "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.5}},
-        "effects": _webcam(motion_blur=0.6, blur_samples=7, rolling_shutter=0.03),
-        "video": {"fourcc": "MJPG", "quality": 70},
-        "supersample": 2,
-    },
+    "tune_fast_pan_e": _fast_pan_twin(
+        "tune_fast_pan_e", 310, 410, hfov_deg=60, dist=[-0.085, 0.045, 0.0004, -0.0003, 0.0],
+        board=(4, 3, 0.035, 0.008, 24),
+        pan={"azimuth": -110, "distance": 0.48, "elevation": 62, "pan_deg": 21,
+             "cycles": 1.2, "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.5}}),
 }
 PRESETS.update(TUNING_TWINS)
 
