@@ -94,9 +94,12 @@ class PrinterSetupDialog(QDialog):
         self.profile_info.setWordWrap(True)
         self.bed_anchor_button = QPushButton("Bed marker...")
         self.bed_anchor_button.setToolTip("Which marker lies on the bed and where (saved in the printer profile)")
+        # the summary on a row of its own: a word-wrapped label beside a button in one row was given one
+        # line's height and cut its second line off
+        form.addRow("", self.profile_info)
         row = QHBoxLayout()
-        row.addWidget(self.profile_info, 1)
         row.addWidget(self.bed_anchor_button)
+        row.addStretch(1)
         form.addRow("", row)
 
     def _add_link_choice_row(self, form: QFormLayout) -> None:
