@@ -99,6 +99,20 @@ def test_failed_source_resets_and_stays_out_of_recent(qtbot, window, tmp_path, r
     assert w.replay.play_button.isEnabled()
 
 
+def test_a_source_that_fails_after_another_leaves_no_figures_of_the_first(qtbot, window, tmp_path, recording):
+    """The tracking panel and the status bar kept showing the last source's state and frame rate ("marker",
+    12 anchors, 4 fps) after a camera that does not exist failed to open."""
+    w = window
+    w.open_source(str(recording))
+    qtbot.waitUntil(lambda: w.tracking_panel.state.text() != "-", timeout=TIMEOUT_MS)
+    w.open_source(str(tmp_path / "no-such-recording"))
+    qtbot.waitUntil(lambda: len(w.errors) > 0 and w.engine is None, timeout=TIMEOUT_MS)
+    qtbot.wait(600)   # the status refresh runs on a timer: it must not bring the old figures back
+    assert w.session.last_shown is None
+    assert w.tracking_panel.state.text() == "-" and w.tracking_panel.fps.text() == "-"
+    assert w.status_state.text() == "" and w.status_fps.text() == ""
+
+
 # -- undo / redo ----------------------------------------------------------------------------------------
 def test_undo_redo_placement_and_control_point_by_keyboard(qtbot, window):
     w = window

@@ -242,6 +242,7 @@ class Session:
             self.old_engines = [e for e in self.old_engines if e.running] + [self.engine]
             self.engine = None
             self.source_info = None
+            self.last_shown = None   # its frames are no longer what is tracked
 
     def shutdown(self, wait: float = 2.0) -> None:
         """Stop recording and every engine (closing the app)."""
@@ -277,7 +278,6 @@ class Session:
         name = display_name(self.source_spec) if self.source_spec else ""
         self.close_source()
         self.source_spec = None
-        self.last_shown = None
         self.events.playing_changed.emit(False)
         self.events.source_failed.emit(name, line)
 

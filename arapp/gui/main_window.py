@@ -191,6 +191,10 @@ class MainWindow(QMainWindow):
 
     def _source_opening(self, name: str) -> None:
         self.stats.restart()
+        # the last source's figures are not this one's (and stay wrong if it fails to open)
+        self.tracking_panel.clear_stats()
+        for label in (self.status_state, self.status_fps, self.status_latency):
+            label.setText("")
         self.status_source.setText(f"opening {name}...")
         self.view.message = f"Opening {name}..."
         self.view.set_image(None)

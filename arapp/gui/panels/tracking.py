@@ -88,6 +88,13 @@ class TrackingPanel(QWidget):
         for i in range(4):
             self.anchor_tree.resizeColumnToContents(i)
 
+    def clear_stats(self) -> None:
+        """Back to "-" everywhere: nothing is being tracked (a source opening, or none)."""
+        for label in (self.state, self.markers, self.inliers, self.fps, self.latency, self.timing, self.dropped):
+            label.setText("-")
+        self.state.setStyleSheet("")
+        self._dropped_marks.clear()
+
     def update_stats(self, result, fps: float, latency_ms: float, dropped: int) -> None:
         """result: the pipeline's FrameResult of the frame just painted."""
         self.state.setText(result.state)
