@@ -668,8 +668,8 @@ class Tracker:
         if tracks is None or len(tracks) < FLOW_SEEDS // 2:
             tracks = seed_on_plane(self.camera, self._prev_gray, self.motion.last, FLOW_SEEDS, keep=tracks,
                                    later=(self.motion.predict(t), t - self.motion.last_t))
-        got = follow(self.camera, tracks, gray, self.motion.predict(t), self.min_inliers, dt=t - self.motion.last_t,
-                     lifted_from=self.motion.last)
+        got = follow(self.camera, tracks, gray, self.motion.predict(t), self.min_inliers,
+                     dt=t - self.motion.last_t, lifted_from=self.motion.last)
         if got is None or not self._plausible(got[0], self.motion.last, t):
             return None
         return got
@@ -744,6 +744,12 @@ class Tracker:
         if ar is not None and ar.raw_world_from_camera is not None and len(ar.object_points) >= 4:
             self._anchor_corners = np.asarray(ar.object_points, float).reshape(-1, 3)
 
+    def _corner_motion(self, corners: np.ndarray, pose: np.ndarray) -> float:
+        """How far (pixels, the most of any) world points `corners` (N,3) move in the image from the last
+        pose (`motion.last`) to `pose` (world_from_camera)."""
+        last = self.camera.project_world(corners, self.motion.last)
+        return float(np.linalg.norm(self.camera.project_world(corners, pose) - last, axis=1).max())
+
     def _fast_predicted(self, t) -> bool:
         """Whether the motion model alone moves the corners the anchors last measured `smear_px` or more in
         the image since the last frame: the flow will very likely be needed this frame, so it is worth
@@ -751,9 +757,7 @@ class Tracker:
         if (not self.flow or self._pool is None or self.motion.last is None or self._anchor_corners is None
                 or self.motion.velocity is None or self._prev_gray is None):
             return False
-        last = self.camera.project_world(self._anchor_corners, self.motion.last)
-        moved = np.linalg.norm(self.camera.project_world(self._anchor_corners, self.motion.predict(t)) - last, axis=1)
-        return bool(moved.max() >= self.smear_px)
+        return self._corner_motion(self._anchor_corners, self.motion.predict(t)) >= self.smear_px
 
     def _moving_fast(self, ar, t) -> bool:
         """Whether the anchors may have moved more than smear_px in the image since the last frame, by the
@@ -762,9 +766,8 @@ class Tracker:
         if not self.flow or self.motion.last is None:
             return False
         corners = np.asarray(ar.object_points, float).reshape(-1, 3)
-        last = self.camera.project_world(corners, self.motion.last)
         measured = ar.raw_world_from_camera if ar.raw_world_from_camera is not None else self._anchor_output(ar)
-        return any(np.linalg.norm(self.camera.project_world(corners, p) - last, axis=1).max() >= self.smear_px
+        return any(self._corner_motion(corners, p) >= self.smear_px
                    for p in (self.motion.predict(t), np.asarray(measured, float)))
 
     def _flow_result(self, got, t, t0, markers: int) -> TrackResult:
@@ -804,7 +807,7 @@ class Tracker:
             return False   # markers and QR codes are seen whole or not at all
         pose = np.asarray(pose, float)
         seen = np.asarray(ar.object_points, float).reshape(-1, 3)
-        whole = np.concatenate([m.to_world(m.outline()) for m in models])
+        whole = np.concatenate([self._anchors.outlines[i] for i in ar.anchors_seen])
         spread_seen = position_spread(self.K, pose, seen, 1.0) * np.sqrt(len(seen))
         spread_whole = position_spread(self.K, pose, whole, 1.0) * np.sqrt(len(whole))
         # an outline partly behind the camera (inf) says nothing: not partial

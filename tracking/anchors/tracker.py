@@ -112,7 +112,9 @@ class AnchorTracker:
         self.camera = camera
         self.models: list[AnchorModel] = build_models(self.anchors)
         self.world_from_anchor = [m.world_from_anchor for m in self.models]
-        self._outlines = np.concatenate([m.to_world(m.outline()) for m in self.models])   # world points (N,3)
+        # each anchor's outline in world points (K,3), and all of them together
+        self.outlines = [m.to_world(m.outline()) for m in self.models]
+        self._outlines = np.concatenate(self.outlines)
         self.aruco = ArucoDetection(self.models, camera)
         self.qr = QRTracking(self.models, camera)
         self.filter_enabled = bool(filter)
@@ -337,8 +339,8 @@ class AnchorTracker:
         at least `deskew_extrapolate_min` points (fewer make the difference of two fields too noisy), the
         change between the two fields carries it on to the middle of the stretch the point is moved over
         (the image acceleration of a hand-held camera is what the lag otherwise leaves in the corners).
-        First order in d; points of an anchor not seen in the last frame are left as they are. Also remembers this frame's
-        points and fields.
+        First order in d; points of an anchor not seen in the last frame are left as they are. Also
+        remembers this frame's points and fields.
         """
         cam = self.camera
         if cam.readout <= 0:
@@ -526,14 +528,9 @@ class AnchorTracker:
 
     def _aruco_roi(self, cfw: np.ndarray, shape) -> tuple[int, int, int, int] | None:
         """Box around the predicted image of every ArUco anchor in front of the camera; None = whole frame."""
-        pts = []
-        for m in self.aruco.models:
-            w = m.to_world(m.outline())
-            px, z = project(self.camera, cfw, w)
-            if np.any(z <= 0.01):
-                return None
-            pts.append(px)
-        pts = np.concatenate(pts)
+        pts, z = project(self.camera, cfw, np.concatenate([self.outlines[m.index] for m in self.aruco.models]))
+        if np.any(z <= 0.01):
+            return None
         h, w = shape
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         # slack for motion the prediction missed and for the marker border the detector needs to see

@@ -59,9 +59,9 @@ def _pose_jacobian(fx: float, fy: float, x: np.ndarray, y: np.ndarray, iz: np.nd
 
 
 def position_spread(K: np.ndarray, world_from_camera: np.ndarray, X: np.ndarray, pixel_sigma: float) -> float:
-    """Standard deviation (metres, summed over the three axes) of the camera position a pose fitted to world
-    points X (N,3) would have, their pixels measured to `pixel_sigma` px each axis: the translation part of
-    the fit's covariance, pixel_sigma^2 (J^T J)^-1. Large when the points hold the position poorly (a few
+    """The spread (metres: the root of the summed variances along the three axes) of the camera position a
+    pose fitted to world points X (N,3) would have, their pixels measured to `pixel_sigma` px each axis:
+    the translation part of the fit's covariance, pixel_sigma^2 (J^T J)^-1. Large when the points hold the position poorly (a few
     markers in a row at the image edge: their tilt and the camera's shift trade off); inf below 3 points."""
     X = np.asarray(X, float).reshape(-1, 3)
     if len(X) < 3:
