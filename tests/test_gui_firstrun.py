@@ -169,6 +169,10 @@ def test_welcome_view_offers_the_first_steps(qtbot, repo_root):
     recs = bundled_recordings()
     names = [p.split("/")[-1] for p, _ in recs]
     assert "board_orbit" in names and "printer_bed" in names
+    # the tracker's tuning and test recordings are data, not examples: a first-time user saw eleven of
+    # them (tune_fast_pan_c, ...) listed without a word on what they show
+    assert not any(n.startswith(("tune_", "test_")) for n in names)
+    assert all(": " in line for _, line in recs)   # each says what it shows
     view = WelcomeView()
     qtbot.addWidget(view)
     for button, signal in ((view.camera_button, view.open_camera_requested),

@@ -49,8 +49,8 @@ def bundled_recordings(folder: Path = RECORDINGS_DIR) -> list[tuple[str, str]]:
     if not folder.is_dir():
         return out
     for sub in sorted(p for p in folder.iterdir() if (p / "session.json").is_file()):
-        if sub.name.startswith("test_"):
-            continue  # recordings made for the test suite only
+        if sub.name.startswith(("test_", "tune_")):
+            continue  # the tracker's test and tuning data (recordings/README.md), not examples
         try:
             session = json.loads((sub / "session.json").read_text())
         except (OSError, ValueError):
