@@ -144,10 +144,11 @@ def _row_time_velocity(camera: Camera, before: np.ndarray, now: np.ndarray, ok: 
     out = v + shift[:, :1] * (dx @ coef) + shift[:, 1:] * (dy @ coef)
     if before_velocity is not None:
         # the two path velocities are dt apart (the frame interval taken as steady); from the last one's
-        # time (halfway along the path) to the middle of the deskew stretch is (dt + d) / 2
+        # time (halfway along the path, t - dt/2 + d) to the middle of the deskew stretch (t + d/2) is
+        # (dt - d) / 2
         had = np.isfinite(before_velocity).all(axis=1)
         d = row_offsets(camera, now[had, 1])
-        out[had] = v[had] + (v[had] - before_velocity[had]) * ((dt + d) / (2 * dt))[:, None]
+        out[had] = v[had] + (v[had] - before_velocity[had]) * ((dt - d) / (2 * dt))[:, None]
     return out
 
 
