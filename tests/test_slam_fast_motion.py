@@ -6,6 +6,7 @@ truth, the anchors-only tracker."""
 
 import threading
 
+import cv2
 import numpy as np
 import pytest
 
@@ -239,7 +240,8 @@ def test_flow_carries_a_rolling_shutter_pan_between_the_boards_visits(name):
     it poorly was taken over the flow at its return. On _c three markers in a row at the image edge fitted
     well and read 22 mm off (max 33 mm), on _d one marker at the edge started the pose 51 mm off: a board
     seen in part (`Tracker._partial_view`) neither starts the pose nor beats the flow when smeared.
-    Measured now: median 2.7 / 2.2 / 3.8 / 2.8 mm, max 8.2 / 4.2 / 6.8 / 9.6 mm."""
+    Measured now (a seam in a fast pan shown at once, the flow's velocity carried to the right time):
+    median 2.8 / 1.5 / 2.2 / 1.8 mm, max 6.8 / 4.3 / 8.2 / 6.8 mm."""
     frames, session = recording(name)
     with Tracker(session.camera, session.anchors, threaded=False) as tr:
         r = run_tracker(tr, frames)
@@ -268,3 +270,31 @@ def test_no_fade_from_a_target_predicted_by_a_start_up_velocity():
         r = run_tracker(tr, frames)
     tracked = np.nonzero(np.isfinite(r["errors"]))[0]
     assert r["errors"][tracked[2:]].max() < 0.012
+
+
+@pytest.mark.parametrize("turn, flow_px, faded", [(0.9, None, False), (0.05, None, True), (0.05, 20.0, False)])
+def test_a_seam_is_faded_only_where_the_view_moves_slowly(turn, flow_px, faded):
+    """A change of pose source (anchors -> map) with a 3 mm step between them: on a camera turning slowly
+    (0.05 rad/s, under a pixel a frame) the step is faded (this frame shows where the old source would have
+    been); in a fast pan (0.9 rad/s, ~16 px a frame by the motion model, or 20 px measured by this frame's
+    flow) the new pose is shown at once, as a fade would keep the old source's error for frames that the
+    motion hides anyway (`fast_blend_frames`). Rule written here: the output is the new pose, or the
+    predicted one."""
+    from tracking.session import parse_anchors
+
+    anchors = parse_anchors([{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0, "length": 0.05}])
+    with Tracker(PLAIN, anchors, threaded=False) as tr:
+        start = look([0.0, -0.3, 0.4])
+        for k in range(3):
+            tr.motion.update(start @ make_pose(cv2.Rodrigues(np.array([0.0, turn * k / 30, 0.0]))[0], np.zeros(3)), k / 30)
+        t = 3 / 30
+        pred = tr.motion.predict(t)
+        tr._last_out, tr._source, tr._lost, tr._frame = tr.motion.last.copy(), "anchors", 0, 7
+        if flow_px is not None:
+            moved = np.tile([flow_px, 0.0], (50, 1))
+            tr._followed = (7, (pred, Tracks(np.zeros((480, 640), np.uint8), np.zeros((50, 2), np.float32),
+                                             np.zeros((50, 3)), moved)))
+        new = pred @ make_pose(np.eye(3), [0.003, 0.0, 0.0])
+        out = tr._output(new, pred, "map")
+    shown = new if not faded else pred
+    assert np.abs(out - shown).max() < 1e-9, (out[:3, 3], new[:3, 3], pred[:3, 3])

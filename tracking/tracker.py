@@ -72,6 +72,11 @@ PRECISE_RMS_PX = 0.6
 # the most the camera position's spread per corner may grow over that of the anchors' whole outline before
 # the anchors seen count as a partial view (they do not start the pose, and lose to the flow when smeared)
 PARTIAL_VIEW = 1.8
+# the most a board's first pose may be expected to be off (its camera position's spread with its own RMS
+# residual as the pixel noise), as a fraction of the camera's distance from it, to start the pose: four
+# smeared markers caught mid-pan fit to ~1 px and read ~2 cm off at 0.5 m; a board that fits to 0.7 px
+# on seven markers, ~1 %, reads 2 mm off
+START_SPREAD = 0.015
 FLOW_SEEDS = 300  # points followed by optical flow when the anchors and the map both fail
 
 
@@ -143,6 +148,10 @@ class TrackerConfig:
     corners (a board, a QR code, several markers; none partly covered), the first step taken on the switch
     frame itself: they are good to millimetres, while what the output fades from (the map, flow) may have
     drifted by centimetres."""
+    fast_blend_frames: int = 1
+    """frames over which a seam is faded while the view moves `smear_px` or more a frame (a fast pan): a step
+    of a few pixels is lost in such motion, and each frame of fade keeps showing the old source's error
+    (1: the new source is shown at once)."""
     min_inliers: int = 20
     """map points a keypoint-only pose needs."""
     radius: float = 12.0
@@ -285,6 +294,7 @@ class Tracker:
         self.mapper = LocalMapper(self.map, self.K, ba=ba, threaded=threaded) if slam else None
         self.blender = PoseBlender(blend_frames)
         self.precise_blend_frames = max(1, int(cfg.precise_blend_frames))
+        self.fast_blend_frames = max(1, int(cfg.fast_blend_frames))
         self.motion = MotionModel()
         self._reset_state()
 
@@ -467,7 +477,8 @@ class Tracker:
 
         corners_w, corners_uv, markers = self._anchor_points(ar)
         if (len(corners_w) and (self._lost > 0 or self.motion.last is None)
-                and (self._too_smeared_to_start(ar, gray) or self._partial_view(ar))):
+                and (self._too_smeared_to_start(ar, gray) or self._partial_view(ar)
+                     or self._start_uncertain(ar))):
             corners_w, corners_uv = corners_w[:0], corners_uv[:0]   # the map may still relocalise
         pred = self.motion.predict(t)
         ids, X, D = self.map.arrays()
@@ -750,6 +761,24 @@ class Tracker:
         last = self.camera.project_world(corners, self.motion.last)
         return float(np.linalg.norm(self.camera.project_world(corners, pose) - last, axis=1).max())
 
+    def _view_motion(self, pred: np.ndarray) -> float:
+        """How far (pixels) the view moved since the last frame: the most of the motion model's (`pred`, the
+        motion of five image points, the centre and halfway to each corner, at the depth of the world
+        origin) and, when the flow ran this frame, the median motion of its points. Not this frame's pose:
+        its motion holds the very step a seam is about."""
+        followed = self._followed[1] if self._followed is not None and self._followed[0] == self._frame else None
+        flow = 0.0 if followed is None else float(np.median(np.linalg.norm(followed[1].moved, axis=1)))
+        return max(flow, self._model_motion(pred))
+
+    def _model_motion(self, pose: np.ndarray) -> float:
+        """Pixels the view moves from `motion.last` to `pose` (see `_view_motion`)."""
+        w, h = self.camera.size
+        px = np.array([[w / 2, h / 2], [w / 4, h / 4], [3 * w / 4, h / 4], [w / 4, 3 * h / 4], [3 * w / 4, 3 * h / 4]])
+        last = self.motion.last
+        depth = max(float((np.linalg.inv(last) @ np.array([0.0, 0.0, 0.0, 1.0]))[2]), 0.05)
+        world = self.camera.unproject(px, depth) @ last[:3, :3].T + last[:3, 3]
+        return float(np.linalg.norm(self.camera.project_world(world, pose) - px, axis=1).max())
+
     def _fast_predicted(self, t) -> bool:
         """Whether the motion model alone moves the corners the anchors last measured `smear_px` or more in
         the image since the last frame: the flow will very likely be needed this frame, so it is worth
@@ -801,17 +830,37 @@ class Tracker:
         root of the corner count) over that of the anchors' whole outline at the same pose exceeds
         `PARTIAL_VIEW`. A board's last few markers at the image edge read centimetres off (their tilt
         and the camera's shift trade off); a whole board is about 1. Only boards can be seen in part."""
-        pose = ar.raw_world_from_camera
-        models = [self._anchors.models[i] for i in ar.anchors_seen]
-        if pose is None or not any(len(m.markers) > 1 for m in models):
+        board = self._board_fit(ar)
+        if board is None:
             return False   # markers and QR codes are seen whole or not at all
-        pose = np.asarray(pose, float)
-        seen = np.asarray(ar.object_points, float).reshape(-1, 3)
+        pose, seen = board
         whole = np.concatenate([self._anchors.outlines[i] for i in ar.anchors_seen])
         spread_seen = position_spread(self.K, pose, seen, 1.0) * np.sqrt(len(seen))
         spread_whole = position_spread(self.K, pose, whole, 1.0) * np.sqrt(len(whole))
         # an outline partly behind the camera (inf) says nothing: not partial
         return bool(np.isfinite(spread_whole) and spread_seen > PARTIAL_VIEW * spread_whole)
+
+    def _board_fit(self, ar) -> tuple[np.ndarray, np.ndarray] | None:
+        """(the anchors' raw pose this frame, world_from_camera; the world corners (N,3) it was fitted to) when
+        the anchors seen include a board; None otherwise."""
+        pose = ar.raw_world_from_camera
+        if pose is None or not any(len(self._anchors.models[i].markers) > 1 for i in ar.anchors_seen):
+            return None
+        return np.asarray(pose, float), np.asarray(ar.object_points, float).reshape(-1, 3)
+
+    def _start_uncertain(self, ar) -> bool:
+        """Whether a board's pose this frame is expected to be off by more than `START_SPREAD` of the camera's
+        distance from it: the camera position's spread (`position_spread`) with the fit's own RMS residual,
+        scaled to the residual's degrees of freedom, as the pixel noise. Markers and QR codes (four corners
+        fit to a few hundredths of a pixel whatever their error) are left to `start_sharpness`."""
+        board = self._board_fit(ar)
+        if board is None or len(board[1]) < 4 or not np.isfinite(ar.reprojection_error):
+            return False
+        pose, seen = board
+        n = len(seen)
+        sigma = ar.reprojection_error * np.sqrt(2 * n / max(2 * n - 6, 1))
+        distance = float(np.linalg.norm(pose[:3, 3] - seen.mean(axis=0)))
+        return bool(position_spread(self.K, pose, seen, sigma) > START_SPREAD * distance)
 
     @staticmethod
     def _fits_well(ar) -> bool:
@@ -910,8 +959,12 @@ class Tracker:
                 and self.motion.steps >= 2):
             # where the output would have gone: the last output moved by the predicted camera motion
             target = self._last_out @ np.linalg.inv(self.motion.last) @ pred
-            # onto precise anchors the fade starts on this very frame: they are the better pose
-            self.blender.switch(pose, target, self.precise_blend_frames if precise else None, at_once=precise)
+            if self._view_motion(pred) >= self.smear_px:
+                # a fast pan hides a step of a few pixels; fading it would keep the old error for frames
+                self.blender.switch(pose, target, self.fast_blend_frames, at_once=True)
+            else:
+                # onto precise anchors the fade starts on this very frame: they are the better pose
+                self.blender.switch(pose, target, self.precise_blend_frames if precise else None, at_once=precise)
         elif precise:
             # the same source turned precise mid-fade (a board coming back into view after a lone marker
             # carried it): no reason left to keep showing the old offset for long
