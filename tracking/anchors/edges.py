@@ -23,13 +23,24 @@ from tracking.camera import Camera
 # with consensus_px or strong_only: edge samples below this fraction of the marker's typical step are left out
 STRONG_STEP = 0.75
 
+_NS = 16                                # edge samples along each side
+_ALONG = np.linspace(0.0, 1.0, _NS)     # their positions, as fractions of the sampled stretch
+_ACROSS = np.linspace(-1.0, 1.0, 17)    # the window across the edge, as fractions of its reach
+_NEXT = [1, 2, 3, 0]                    # corner k's side ends at corner k + 1
+_PREV = [3, 0, 1, 2]
+
 
 def _distort(camera: Camera, und: np.ndarray) -> np.ndarray:
     """Distorted pixels of undistorted pixels (same K)."""
     if not camera.has_distortion:
         return und
-    n = (und - [camera.cx, camera.cy]) / [camera.fx, camera.fy]
-    return camera.project(np.c_[n, np.ones(len(n))])
+    K = camera.K
+    n = np.empty((len(und), 1, 3))
+    n[:, 0, :2] = (und - [K[0, 2], K[1, 2]]) / [K[0, 0], K[1, 1]]
+    n[:, 0, 2] = 1.0
+    # (Camera.project's own call, without its conversions)
+    px, _ = cv2.projectPoints(n, np.zeros(3), np.zeros(3), K, camera.dist)
+    return px.reshape(-1, 2)
 
 
 def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, camera: Camera | None = None,
@@ -60,7 +71,8 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
         return out, ok
     h, w = gray.shape
     # work on float32 samples of just the region the quads cover (a 720p conversion per call is not free)
-    reach = float(np.clip(0.45 * cell_px, 1.5, 5.0).max()) + 3.0
+    r = np.minimum(np.maximum(0.45 * cell_px, 1.5), 5.0)  # (M,) the search's reach across each edge
+    reach = float(r.max()) + 3.0
     x0 = int(max(np.floor(quads[..., 0].min() - reach), 0))
     y0 = int(max(np.floor(quads[..., 1].min() - reach), 0))
     x1 = int(min(np.ceil(quads[..., 0].max() + reach) + 1, w))
@@ -70,40 +82,50 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
     img = gray[y0:y1, x0:x1].astype(np.float32)
     # Sample geometry for every side of every quad at once.
     a = quads
-    b = np.roll(quads, -1, axis=1)
+    b = quads[:, _NEXT]
     length = np.linalg.norm(b - a, axis=2)  # (M,4)
-    ns = 16
+    ns = _NS
     em = np.broadcast_to(np.asarray(end_margin, dtype=np.float64), (len(quads),))
-    t = em[:, None] + (1.0 - 2.0 * em[:, None]) * np.linspace(0.0, 1.0, ns)[None, :]  # (M,ns)
-    r = np.clip(0.45 * cell_px, 1.5, 5.0)  # (M,)
-    steps = np.linspace(-1.0, 1.0, 17)  # fractions of r
+    t = em[:, None] + (1.0 - 2.0 * em[:, None]) * _ALONG[None, :]  # (M,ns)
+    steps = _ACROSS  # fractions of r
     d = (b - a) / np.maximum(length[..., None], 1e-9)
     nrm = np.stack([-d[..., 1], d[..., 0]], axis=-1)  # (M,4,2)
     base = a[:, :, None, :] + (b - a)[:, :, None, :] * t[:, None, :, None]  # (M,4,ns,2)
     offs = steps[None, :] * r[:, None]  # (M,17)
+    # The samples are laid out (17 across the edge, marker, side, sample along it), x and y apart: numpy's
+    # loops then run over long contiguous rows (a trailing axis of 2 or 17 makes every operation slow).
+    across = nrm[None, :, :, None, :] * offs.T[:, :, None, None, None]  # (17,M,4,1,2): window across each side
+    ax = np.ascontiguousarray(np.broadcast_to(across[..., 0], (17, len(quads), 4, ns)))
+    ay = np.ascontiguousarray(np.broadcast_to(across[..., 1], (17, len(quads), 4, ns)))
+    rr = r[:, None, None]
+    dx = steps[1] - steps[0]
+    # remap's maps: any 2-D shape under 32767 on both sides (4 M columns: as many markers as before)
+    map_shape = (17 * ns, 4 * len(quads))
     shift = np.zeros(base.shape[:-1])
     valid = np.ones(base.shape[:-1], bool)
     for _ in range(2):  # the second pass re-centres the window on the first estimate
         centre = base + nrm[:, :, None, :] * shift[..., None]
-        pts = centre[:, :, :, None, :] + nrm[:, :, None, None, :] * offs[:, None, None, :, None]  # (M,4,ns,17,2)
-        # a 2-D map, one row per side: cv2.remap refuses maps of 32767 rows or more, which a single
-        # column of samples reached at 31 markers (16 x 17 samples per side, 4 sides per marker)
-        grid = pts.reshape(-1, pts.shape[2] * pts.shape[3], 2).astype(np.float32)
-        vals = cv2.remap(img, grid[..., 0] - np.float32(x0), grid[..., 1] - np.float32(y0), cv2.INTER_LINEAR,
-                         borderMode=cv2.BORDER_REPLICATE).reshape(pts.shape[:-1]).astype(np.float64)
-        flat = grid.reshape(-1, 2)
-        inside = (flat[:, 0] >= 0) & (flat[:, 0] <= w - 1) & (flat[:, 1] >= 0) & (flat[:, 1] <= h - 1)
-        inside = inside.reshape(pts.shape[:-1]).all(axis=-1)  # (M,4,ns)
+        gx = (centre[..., 0] + ax).astype(np.float32)  # (17,M,4,ns)
+        gy = (centre[..., 1] + ay).astype(np.float32)
+        vals = cv2.remap(img, (gx - np.float32(x0)).reshape(map_shape), (gy - np.float32(y0)).reshape(map_shape),
+                         cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(gx.shape).astype(np.float64)
+        # each window is a straight run of samples, monotonic in x and in y (rounding included): it lies
+        # inside the image when both of its ends do
+        inside = ((gx[0] >= 0) & (gx[0] <= w - 1) & (gx[-1] >= 0) & (gx[-1] <= w - 1)
+                  & (gy[0] >= 0) & (gy[0] <= h - 1) & (gy[-1] >= 0) & (gy[-1] <= h - 1))  # (M,4,ns)
         # Edge position = centroid of |dI/ds|; by parts it is a ratio of areas under the profile, which
         # the trapezoid rule gets right on interpolated samples (a gradient peak would snap to pixels).
-        lo, hi = vals[..., 0], vals[..., -1]
+        lo, hi = vals[0], vals[-1]
         contrast = hi - lo
-        rr = r[:, None, None]
-        area = np.trapezoid(vals, dx=(steps[1] - steps[0]), axis=-1) * rr  # integral over s in [-r, r]
+        # the trapezoid rule over s in [-r, r] (np.trapezoid's terms, summed in numpy's pairwise order
+        # for 16 terms: eight running sums, then combined pairwise)
+        e = dx * (vals[1:] + vals[:-1]) / 2.0
+        p = e[:8] + e[8:]
+        area = (((p[0] + p[1]) + (p[2] + p[3])) + ((p[4] + p[5]) + (p[6] + p[7]))) * rr
         with np.errstate(divide="ignore", invalid="ignore"):
             sc = (rr * (hi + lo) - area) / contrast
-        mono = np.abs(np.diff(vals, axis=-1)) <= np.abs(contrast)[..., None] * 0.6 + 2.0
-        valid = inside & (np.abs(contrast) > min_contrast) & np.isfinite(sc) & (np.abs(sc) < rr) & mono.all(-1)
+        mono = np.abs(np.diff(vals, axis=0)).max(axis=0) <= np.abs(contrast) * 0.6 + 2.0
+        valid = inside & (np.abs(contrast) > min_contrast) & np.isfinite(sc) & (np.abs(sc) < rr) & mono
         shift = shift + np.where(valid, sc, 0.0)
     edge = base + nrm[:, :, None, :] * shift[..., None]  # (M,4,ns,2)
     # Lines for all sides at once: undistort every edge point in one call, then a weighted total-least-
@@ -133,16 +155,17 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
         # normal = eigenvector of the scatter matrix with the smaller eigenvalue
         theta = 0.5 * np.arctan2(2 * sxy, sxx - syy)  # direction of the line
         nvec = np.stack([-np.sin(theta), np.cos(theta)], axis=-1)  # (M,4,2)
-        res = np.abs(((pts - c[:, :, None, :]) * nvec[:, :, None, :]).sum(-1))
-        masked = np.sort(np.where(wgt > 0, res, np.inf), axis=-1)
-        mid = np.clip((cnt.astype(int) - 1) // 2, 0, ns - 1)
-        rmed = np.where(cnt > 0, np.take_along_axis(masked, mid[..., None], -1)[..., 0], 0.0)
+        res = np.abs((pts[..., 0] - c[:, :, None, 0]) * nvec[:, :, None, 0]
+                     + (pts[..., 1] - c[:, :, None, 1]) * nvec[:, :, None, 1])
+        masked = np.sort(np.where(wgt > 0, res, np.inf), axis=-1).reshape(-1, ns)
+        mid = np.minimum(np.maximum((cnt.astype(int) - 1) // 2, 0), ns - 1).ravel()
+        rmed = np.where(cnt > 0, masked[np.arange(len(mid)), mid].reshape(cnt.shape), 0.0)
         wgt = wgt * (res <= np.maximum(3.0 * 1.4826 * rmed, 0.1)[..., None])
     cnt = wgt.sum(axis=-1)
     side_ok = cnt >= 5
     # corner k = intersection of side k-1 and side k: n1.x = n1.c1, n2.x = n2.c2
-    n1, n2 = np.roll(nvec, 1, axis=1), nvec
-    c1, c2 = np.roll(c, 1, axis=1), c
+    n1, n2 = nvec[:, _PREV], nvec
+    c1, c2 = c[:, _PREV], c
     det = n1[..., 0] * n2[..., 1] - n1[..., 1] * n2[..., 0]
     b1 = (n1 * c1).sum(-1)
     b2 = (n2 * c2).sum(-1)
