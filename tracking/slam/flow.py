@@ -107,8 +107,9 @@ def _quadratic_basis(xy: np.ndarray, centre: np.ndarray, scale: float) -> tuple[
     pixels, and their derivatives (N,6) by x and by y, per pixel."""
     x, y = ((np.asarray(xy, float).reshape(-1, 2) - centre) / scale).T
     zero, one = np.zeros_like(x), np.ones_like(x)
-    return (np.c_[one, x, y, x * x, x * y, y * y], np.c_[zero, one, zero, 2 * x, y, zero] / scale,
-            np.c_[zero, zero, one, zero, x, 2 * y] / scale)
+    return (np.column_stack((one, x, y, x * x, x * y, y * y)),
+            np.column_stack((zero, one, zero, 2 * x, y, zero)) / scale,
+            np.column_stack((zero, zero, one, zero, x, 2 * y)) / scale)
 
 
 def velocity_field(xy: np.ndarray, velocity: np.ndarray, at: np.ndarray,
