@@ -221,6 +221,41 @@ def _intersect(l1, l2):
     return np.linalg.solve(A, [n1 @ c1, n2 @ c2])
 
 
+def _linear_percentile(n: int, q: float, value_at) -> float:
+    """np.percentile's default ('linear') q-th percentile of n values, computed as numpy does (its float64
+    result: float64 values, or q given as a sequence), from
+    `value_at(k)`: the k-th smallest value (k from 0). Lets a caller find just the order statistics
+    needed (from a histogram, a partial partition) instead of numpy's partition with its end points."""
+    virtual = (n - 1) * (q / 100)
+    if virtual >= n - 1:
+        return float(value_at(n - 1))
+    if virtual < 0:
+        return float(value_at(0))
+    prev = np.floor(virtual)
+    gamma = float(virtual - prev)
+    a, b = value_at(int(prev)), value_at(int(prev) + 1)
+    diff = float(b - a)   # (in the values' own type, as numpy; the rest in float64)
+    # numpy's _lerp: from the nearer end
+    return float(b) - diff * (1 - gamma) if gamma >= 0.5 else float(a) + diff * gamma
+
+
+def _level_percentiles(image: np.ndarray, qs) -> list[float]:
+    """np.percentile(image, q) for each q of a uint8 image, from its histogram (no sort of the pixels)."""
+    counts = cv2.calcHist([image], [0], None, [256], [0, 256]).ravel().astype(np.int64)
+    cum = np.cumsum(counts)
+    level = lambda k: np.float32(np.searchsorted(cum, k, side="right"))   # the k-th smallest pixel value
+    return [_linear_percentile(image.size, q, level) for q in qs]
+
+
+def _top_percentile(values: np.ndarray, q: float) -> float:
+    """np.percentile(values, q) of a 1-D float array, partitioning at just the two order statistics used."""
+    n = len(values)
+    virtual = (n - 1) * (q / 100)
+    k = int(min(max(np.floor(virtual), 0), n - 1))
+    part = np.partition(values, [k, min(k + 1, n - 1)])
+    return _linear_percentile(n, q, lambda j: part[j])
+
+
 def edge_sharpness(gray: np.ndarray, pixels: np.ndarray, direction: np.ndarray) -> float:
     """How sharp the edges are across `direction` (2,) in the box around `pixels` (N,2) of a grey
     image: the 99th percentile of the intensity gradient along `direction`, per pixel, over the
@@ -232,11 +267,17 @@ def edge_sharpness(gray: np.ndarray, pixels: np.ndarray, direction: np.ndarray) 
     hi = np.minimum(np.ceil(pixels.max(axis=0)).astype(int) + 5, [w, h])
     if (hi - lo).min() < 8 or not np.linalg.norm(direction) > 0:
         return float("nan")
-    roi = gray[lo[1]:hi[1], lo[0]:hi[0]].astype(np.float32)
-    d = np.asarray(direction, float) / np.linalg.norm(direction)
-    gx = cv2.Sobel(roi, cv2.CV_32F, 1, 0, ksize=3) / 8.0
-    gy = cv2.Sobel(roi, cv2.CV_32F, 0, 1, ksize=3) / 8.0
-    lo_i, hi_i = np.percentile(roi, [2, 98])
+    roi = gray[lo[1]:hi[1], lo[0]:hi[0]]
+    if roi.dtype != np.uint8 or roi.ndim != 2:
+        roi = roi.astype(np.float32)
+        lo_i, hi_i = np.percentile(roi, [2, 98])
+    else:
+        # the same percentiles from the 256 levels' histogram
+        lo_i, hi_i = _level_percentiles(roi, (2, 98))
     if hi_i - lo_i < 10:
         return float("nan")
-    return float(np.percentile(np.abs(gx * d[0] + gy * d[1]), 99) / (hi_i - lo_i))
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    # (the 1/8 as Sobel's scale: a power of two, so the same numbers; a uint8 roi gives the same sums)
+    gx = cv2.Sobel(roi, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+    gy = cv2.Sobel(roi, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    return float(_top_percentile(np.abs(gx * d[0] + gy * d[1]).ravel(), 99) / (hi_i - lo_i))

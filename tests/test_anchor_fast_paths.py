@@ -1,0 +1,57 @@
+"""The anchor tracker's faster computations give numpy's / OpenCV's own numbers (oracle: the plain calls)."""
+
+import cv2
+import numpy as np
+
+from tracking.anchors.edges import _level_percentiles, _top_percentile, edge_sharpness
+
+
+def test_percentiles_from_a_histogram_equal_numpys():
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 7, 50, 1001, 13520):
+        img = rng.integers(0, 256, size=(1, n), dtype=np.uint8)
+        if n > 10:
+            img[0, : n // 3] = 17   # long runs of one level, as a marker's black and white give
+        got = _level_percentiles(img, (0, 2, 50, 98, 100))
+        want = np.percentile(img.astype(np.float32), [0, 2, 50, 98, 100])
+        assert np.array_equal(np.array(got), want), (n, got, want)
+
+
+def test_top_percentile_equals_numpys():
+    rng = np.random.default_rng(4)
+    for n in (1, 2, 3, 99, 100, 101, 5000):
+        v = np.abs(rng.normal(size=n)) * 40.0
+        for q in (0, 1, 50, 99, 100):
+            assert _top_percentile(v, q) == np.percentile(v, q), (n, q)
+
+
+def _edge_sharpness_plain(gray, pixels, direction):
+    """The rule as first written: float32 box, Sobel / 8, np.percentile."""
+    h, w = gray.shape[:2]
+    lo = np.maximum(np.floor(pixels.min(axis=0)).astype(int) - 4, 0)
+    hi = np.minimum(np.ceil(pixels.max(axis=0)).astype(int) + 5, [w, h])
+    if (hi - lo).min() < 8 or not np.linalg.norm(direction) > 0:
+        return float("nan")
+    roi = gray[lo[1]:hi[1], lo[0]:hi[0]].astype(np.float32)
+    d = np.asarray(direction, float) / np.linalg.norm(direction)
+    gx = cv2.Sobel(roi, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    gy = cv2.Sobel(roi, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    lo_i, hi_i = np.percentile(roi, [2, 98])
+    if hi_i - lo_i < 10:
+        return float("nan")
+    return float(np.percentile(np.abs(gx * d[0] + gy * d[1]), 99) / (hi_i - lo_i))
+
+
+def test_edge_sharpness_equals_the_plain_computation():
+    rng = np.random.default_rng(5)
+    img = np.full((240, 320), 200, np.uint8)
+    cv2.rectangle(img, (100, 60), (180, 140), 30, -1)
+    img = cv2.GaussianBlur(img, (0, 0), 1.5)
+    img = np.clip(img + rng.normal(0, 3, img.shape), 0, 255).astype(np.uint8)
+    for k in range(20):
+        pts = np.array([[100, 60], [180, 60], [180, 140], [100, 140]], float) + rng.uniform(-20, 20, (4, 2))
+        d = rng.normal(size=2)
+        a, b = edge_sharpness(img, pts, d), _edge_sharpness_plain(img, pts, d)
+        assert a == b, (k, a, b)
+    flat = np.full((100, 100), 90, np.uint8)
+    assert np.isnan(edge_sharpness(flat, np.array([[10.0, 10.0], [60.0, 60.0]]), np.array([1.0, 0.0])))
