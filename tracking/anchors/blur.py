@@ -26,35 +26,38 @@ MIN_SPREAD = 0.4  # marker sizes: see spread_enough
 PRIOR = 0.03      # standard deviation of the stretch's prior (a 2 px stretch of a 60 px marker is 0.03)
 
 
-def _markers(img: np.ndarray, groups: np.ndarray):
-    """Per point: the index of its group and whether that group has exactly 4 points (a whole marker);
-    per group: its point count and the mean of its points."""
+def marker_groups(img: np.ndarray, groups: np.ndarray):
+    """Per point (of `img` (N,2) pixels, labelled `groups` (N,)): the index of its group and whether that
+    group has exactly 4 points (a whole marker); per group: its point count and the mean of its points.
+    Pass it as `markers` to marker_offsets / spread_enough of the same points to group them once."""
+    img = np.asarray(img, float).reshape(-1, 2)
     uniq, inv, counts = np.unique(groups, return_inverse=True, return_counts=True)
-    sums = np.zeros((len(uniq), 2))
-    np.add.at(sums, inv, img)
+    # (bincount adds in the points' order, as np.add.at did)
+    sums = np.stack([np.bincount(inv, weights=img[:, 0], minlength=len(uniq)),
+                     np.bincount(inv, weights=img[:, 1], minlength=len(uniq))], axis=1)
     return inv, counts[inv] == 4, counts, sums / counts[:, None]
 
 
-def marker_offsets(img: np.ndarray, groups: np.ndarray) -> tuple[np.ndarray, int]:
+def marker_offsets(img: np.ndarray, groups: np.ndarray, markers=None) -> tuple[np.ndarray, int]:
     """Each point's offset (N,2) pixels from the centre of its marker's corners (zeros for points not in a
     group of exactly 4: QR or chessboard points, or markers with a corner dropped), and the number of
-    whole markers."""
+    whole markers. `markers`: marker_groups(img, groups), when the caller has it."""
     img = np.asarray(img, float).reshape(-1, 2)
-    inv, whole, counts, centres = _markers(img, groups)
+    inv, whole, counts, centres = marker_groups(img, groups) if markers is None else markers
     return np.where(whole[:, None], img - centres[inv], 0.0), int((counts == 4).sum())
 
 
-def spread_enough(img: np.ndarray, groups: np.ndarray, min_spread: float = MIN_SPREAD) -> bool:
+def spread_enough(img: np.ndarray, groups: np.ndarray, min_spread: float = MIN_SPREAD, markers=None) -> bool:
     """Whether at least MIN_MARKERS whole markers (groups of 4 points) lie spread in two directions: the
     smaller principal standard deviation of their centres is at least `min_spread` marker sizes. A row
-    or column of markers (a board half out of view) cannot tell a stretch across it from the pose's tilt."""
+    or column of markers (a board half out of view) cannot tell a stretch across it from the pose's tilt.
+    `markers`: marker_groups(img, groups), when the caller has it."""
     img = np.asarray(img, float).reshape(-1, 2)
-    inv, whole, counts, centres = _markers(img, groups)
+    inv, whole, counts, centres = marker_groups(img, groups) if markers is None else markers
     if (counts == 4).sum() < MIN_MARKERS:
         return False
     # a square's corners lie side / sqrt(2) from its centre
-    r2 = np.zeros(len(counts))
-    np.add.at(r2, inv, ((img - centres[inv]) ** 2).sum(axis=1))
+    r2 = np.bincount(inv, weights=((img - centres[inv]) ** 2).sum(axis=1), minlength=len(counts))
     sizes = np.sqrt(2.0 * r2[counts == 4] / 4.0)
     minor = np.sqrt(max(np.linalg.eigvalsh(np.cov(centres[counts == 4].T))[0], 0.0))
     return bool(minor >= min_spread * float(np.median(sizes)))

@@ -72,6 +72,9 @@ class PoseSolution:
     rms: float
     markers: int
     anchors: list[int] = field(default_factory=list)
+    # with a single observation: its IPPE branches as camera_from_world poses (best first), each with its
+    # reprojection errors (pixels) on all of the observation's points; else empty
+    branches: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
 
     @property
     def world_from_camera(self) -> np.ndarray:
@@ -106,6 +109,7 @@ def solve_pose(observations: list[Observation], world_from_anchor: list[np.ndarr
         groups.append(ob.groups + 1_000_000 * (ob.anchor + 1))
         afw = invert(wfa)
         hyps += [cfa @ afw for cfa in planar_solutions(ob, camera)]
+    n_planar = len(hyps)
     world = np.concatenate(worlds)
     img = np.concatenate(imgs)
     group = np.concatenate(groups)
@@ -117,7 +121,9 @@ def solve_pose(observations: list[Observation], world_from_anchor: list[np.ndarr
         hyps.append(predicted_camera_from_world)
     if not hyps:
         return None
-    costs = np.array([_robust_cost(residuals(camera, h, world, img), outlier_px) for h in hyps])
+    errors = [residuals(camera, h, world, img) for h in hyps]
+    costs = np.array([_robust_cost(r, outlier_px) for r in errors])
+    branches = list(zip(hyps[:n_planar], errors[:n_planar])) if len(observations) == 1 else []
     best = int(np.argmin(costs))
     if predicted_camera_from_world is not None:
         Rp = predicted_camera_from_world[:3, :3]
@@ -125,6 +131,9 @@ def solve_pose(observations: list[Observation], world_from_anchor: list[np.ndarr
         best = int(np.argmin(costs / pixel_sigma ** 2 + (ang / motion_sigma_deg) ** 2))
     pose = hyps[best]
     inl = np.ones(len(world), bool)
+    # per point: its group; per group: its size (whole markers are dropped when most of their corners are out)
+    _, group_of, group_size = np.unique(group, return_inverse=True, return_counts=True)
+    small = group_size <= 4
     for thresh in (outlier_px, None):
         r = residuals(camera, pose, world, img)
         if thresh is None:
@@ -132,10 +141,8 @@ def solve_pose(observations: list[Observation], world_from_anchor: list[np.ndarr
             sigma = 1.4826 * np.median(r[inl]) if inl.any() else outlier_px
             thresh = float(np.clip(4.0 * sigma, 1.0, outlier_px))
         new = r < thresh
-        for g in np.unique(group):
-            sel = group == g
-            if sel.sum() <= 4 and new[sel].sum() * 2 < sel.sum():
-                new[sel] = False
+        kept = np.bincount(group_of, weights=new, minlength=len(group_size))
+        new &= ~(small & (kept * 2 < group_size))[group_of]
         if new.sum() < 4:
             return None
         inl = new
@@ -154,4 +161,4 @@ def solve_pose(observations: list[Observation], world_from_anchor: list[np.ndarr
         if np.isin(g, list(used)).any():
             # boards count their markers; ChArUco corners count as the markers that located them
             markers += ob.markers if (ob.groups < 0).all() else len(set(g[np.isin(g, list(used))].tolist()))
-    return PoseSolution(pose, world[inl], img[inl], inl, rms, markers, anchors)
+    return PoseSolution(pose, world[inl], img[inl], inl, rms, markers, anchors, branches)

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from tracking.anchors.dictionaries import aruco_dictionary
-from tracking.anchors.blur import MIN_MARKERS, fit_pose_and_stretch, marker_offsets, spread_enough
+from tracking.anchors.blur import MIN_MARKERS, fit_pose_and_stretch, marker_groups, marker_offsets, spread_enough
 from tracking.anchors.detect import ArucoDetection, Observation, detector_parameters
 from tracking.anchors.edges import edge_sharpness, refine_squares
 from tracking.anchors.filter import PoseFilter
@@ -165,13 +165,13 @@ class AnchorTracker:
 
         Per frame the evidence is (cost of the other branch - cost of the kept one) / pixel_sigma^2, decayed
         by `branch_decay`; True when it falls below -`branch_switch` (the other branch keeps fitting better).
+        `sol`: solve_pose's solution on `obs` (its `branches` are the anchor's two IPPE poses and errors).
         """
         if len(obs) != 1:
             self.branch_evidence = 0.0
             return False
-        ob = obs[0]
-        afw = invert(self.world_from_anchor[ob.anchor])
-        sols = [cfa @ afw for cfa in planar_solutions(ob, self.camera)]
+        # solve_pose's hypotheses for this one observation, with their errors on its points
+        sols = [cfw for cfw, _ in sol.branches]
         if len(sols) < 2:
             return False
         ang = [rotation_angle(s[:3, :3] @ sol.camera_from_world[:3, :3].T) for s in sols]
@@ -179,8 +179,7 @@ class AnchorTracker:
         if rotation_angle(sols[0][:3, :3] @ sols[1][:3, :3].T) < np.radians(2.0):
             self.branch_evidence = 0.0
             return False
-        world = transform_points(self.world_from_anchor[ob.anchor], ob.obj)
-        c = [float(np.sum(residuals(self.camera, s, world, ob.img) ** 2)) for s in sols]
+        c = [float(np.sum(r ** 2)) for _, r in sol.branches]
         self.branch_evidence = self.branch_decay * self.branch_evidence + (c[other] - c[kept]) / 0.25
         if self.branch_evidence < -self.branch_switch:
             self.branch_evidence = 0.0
@@ -212,14 +211,25 @@ class AnchorTracker:
         if not self.filter.initialised:
             return 1.0
         world = np.asarray(sol.world, float)
-        motion = np.median(self.camera.project_world(world, raw) - self.camera.project_world(world, self.filter.pose()),
-                           axis=0)
+        motion = np.median(self._project_world(world, raw) - self._project_world(world, self.filter.pose()), axis=0)
         if np.linalg.norm(motion) < self.smear_px:
             return 1.0
         sharp = edge_sharpness(gray, np.asarray(sol.img, float), motion)
         if not sharp < self.smear_sharpness:
             return 1.0
         return float(max(0.2, sharp / self.smear_sharpness) ** 2)
+
+    def _project_world(self, world: np.ndarray, world_from_camera: np.ndarray) -> np.ndarray:
+        """camera.project_world(world, world_from_camera), remembered for this frame: _unstretch and
+        _smear_weight project the same solution's points under the same poses (the filter's, and the
+        solution's when the stretch fit left it as it was)."""
+        key = (id(world), world_from_camera.tobytes())
+        hit = self._projections.get(key)
+        if hit is not None and hit[0] is world:
+            return hit[1]
+        px = self.camera.project_world(world, world_from_camera)
+        self._projections[key] = (world, px)   # (holding `world` keeps its id from being reused this frame)
+        return px
 
     # ------------------------------------------------------------------------------------------------
     def process(self, image: np.ndarray, t: float, reference: np.ndarray | None = None) -> AnchorResult:
@@ -228,6 +238,7 @@ class AnchorTracker:
         `reference`: the caller's own estimate of this frame's world_from_camera (a map, a motion model),
         used to screen anchors never seen before; without it the filter's prediction is used."""
         t0 = time.perf_counter()
+        self._projections = {}
         gray = to_gray(image)
         if gray.shape != (self.camera.height, self.camera.width):
             raise ValueError(f"image is {gray.shape[1]}x{gray.shape[0]} but the camera is calibrated for "
@@ -311,16 +322,18 @@ class AnchorTracker:
         """The solution refitted together with motion blur's stretch of the markers (blur.py), when five or
         more whole markers, spread in two directions, moved `unblur_px` pixels or more since the last
         filtered pose; its image points are then the corners with the stretch taken out."""
-        groups = np.concatenate([ob.groups + 1_000_000 * (ob.anchor + 1) for ob in obs])[sol.inliers]
-        offsets, whole = marker_offsets(sol.img, groups)
-        if whole < MIN_MARKERS or not spread_enough(sol.img, groups):
-            return sol
+        # (the cheap checks first; the outcome does not depend on their order)
         if not self.filter.initialised:
             return sol   # nothing says whether the markers move
-        moved = np.median(np.linalg.norm(self.camera.project_world(sol.world, sol.world_from_camera)
-                                         - self.camera.project_world(sol.world, self.filter.pose()), axis=1))
-        if moved < self.unblur_px:
+        groups = np.concatenate([ob.groups + 1_000_000 * (ob.anchor + 1) for ob in obs])[sol.inliers]
+        markers = marker_groups(sol.img, groups)
+        if int((markers[2] == 4).sum()) < MIN_MARKERS:
             return sol
+        moved = np.median(np.linalg.norm(self._project_world(sol.world, sol.world_from_camera)
+                                         - self._project_world(sol.world, self.filter.pose()), axis=1))
+        if moved < self.unblur_px or not spread_enough(sol.img, groups, markers=markers):
+            return sol
+        offsets, _ = marker_offsets(sol.img, groups, markers=markers)
         cfw, S = fit_pose_and_stretch(self.camera, sol.camera_from_world, sol.world, sol.img, offsets)
         img = sol.img - offsets @ S.T
         rms = float(np.sqrt(np.mean(residuals(self.camera, cfw, sol.world, img) ** 2)))
