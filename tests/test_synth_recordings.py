@@ -13,7 +13,7 @@ from tracking.session import load_session
 from tracking.sources import RecordingSource
 from tracking.synth import scene_from_arg
 from tracking.synth.patterns import anchor_corners
-from tracking.synth.presets import PRESETS, TEST, TUNING
+from tracking.synth.presets import EXTRA_TUNING, PRESETS, TEST, TUNING
 from tracking.synth.renderer import DeskRenderer
 
 from conftest import ROOT
@@ -178,14 +178,16 @@ def test_test_recordings_are_apart_from_the_tuning_ones():
     """Test recordings come from seeds (scene and desk) no tuning recording uses, are named test_*, and
     recordings/README.md lists every recording under its kind."""
     def seeds(names):
-        return {PRESETS[n]["seed"] for n in names} | {PRESETS[n]["desk"]["seed"] for n in names}
+        scenes = {**PRESETS, **EXTRA_TUNING}
+        return {scenes[n]["seed"] for n in names} | {scenes[n]["desk"]["seed"] for n in names}
 
     assert TEST and TUNING and not set(TEST) & set(TUNING)
     assert not seeds(TEST) & seeds(TUNING)
+    assert not seeds(TEST) & seeds(EXTRA_TUNING) and not set(EXTRA_TUNING) & set(PRESETS)
     assert all(n.startswith("test_") for n in TEST) and not any(n.startswith("test_") for n in TUNING)
     readme = (RECORDINGS / "README.md").read_text()
     tuning_part, test_part = readme.split("## Test recordings", 1)
-    assert all(f"| {n} |" in tuning_part for n in TUNING)
+    assert all(f"| {n} |" in tuning_part for n in [*TUNING, *EXTRA_TUNING])
     assert all(f"| {n} |" in test_part for n in TEST)
     assert "no parameter is chosen by looking at a test recording" in readme
 

@@ -312,15 +312,39 @@ TUNING = list(PRESETS)
 TEST = list(TEST_PRESETS)
 PRESETS.update(TEST_PRESETS)
 
+# Extra fast-pan tuning scenes (stop 15): rendered on demand (`arapp synth xt_fast_pan_f --out DIR`), not
+# bundled (the tests and benchmarks do not run on them, and the repository keeps its size). They were made
+# from the test recording's written description with fresh seeds (scene 311-314, desk 411-414) to judge the
+# flow's changes on more than five pans; they are tuning data like the rest.
+EXTRA_TUNING: dict[str, dict] = {
+    "xt_fast_pan_f": _fast_pan_twin(
+        "xt_fast_pan_f", 311, 411, hfov_deg=62, dist=[-0.07, 0.04, 0.0003, -0.0003, 0.0], board=(4, 3, 0.035, 0.008, 36),
+        pan={"azimuth": -92, "distance": 0.48, "elevation": 60, "pan_deg": 20, "cycles": 1.25,
+             "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.6}}),
+    "xt_fast_pan_g": _fast_pan_twin(
+        "xt_fast_pan_g", 312, 412, hfov_deg=61, dist=[-0.08, 0.045, -0.0003, 0.0004, 0.0], board=(4, 3, 0.034, 0.008, 0),
+        pan={"azimuth": -100, "distance": 0.47, "elevation": 61, "pan_deg": 21, "cycles": 1.2,
+             "shake": {"pos_mm": 2.4, "rot_deg": 0.5, "freq_hz": 2.4}}),
+    "xt_fast_pan_h": _fast_pan_twin(
+        "xt_fast_pan_h", 313, 413, hfov_deg=63, dist=[-0.075, 0.035, 0.0004, 0.0003, 0.0], board=(4, 3, 0.035, 0.009, 12),
+        pan={"azimuth": -88, "distance": 0.49, "elevation": 59, "pan_deg": 19, "cycles": 1.3,
+             "shake": {"pos_mm": 2.6, "rot_deg": 0.5, "freq_hz": 2.5}}),
+    "xt_fast_pan_i": _fast_pan_twin(
+        "xt_fast_pan_i", 314, 414, hfov_deg=60, dist=[-0.085, 0.04, -0.0004, -0.0004, 0.0], board=(4, 3, 0.036, 0.008, 24),
+        pan={"azimuth": -97, "distance": 0.48, "elevation": 60, "pan_deg": 20, "cycles": 1.25,
+             "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.5}}),
+}
+
 
 def preset_names() -> list[str]:
     return list(PRESETS)
 
 
 def preset(name: str) -> dict:
-    """A copy of the named preset's scene dict."""
-    if name not in PRESETS:
+    """A copy of the named preset's scene dict (a bundled recording's, or an extra tuning scene's)."""
+    if name not in PRESETS and name not in EXTRA_TUNING:
         from tracking.errors import SessionError
 
-        raise SessionError(f"no synthetic preset {name!r}; presets: {', '.join(PRESETS)} (or a scene JSON file)")
-    return copy.deepcopy(PRESETS[name])
+        raise SessionError(f"no synthetic preset {name!r}; presets: {', '.join([*PRESETS, *EXTRA_TUNING])} "
+                           "(or a scene JSON file)")
+    return copy.deepcopy(PRESETS[name] if name in PRESETS else EXTRA_TUNING[name])
