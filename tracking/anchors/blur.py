@@ -82,13 +82,20 @@ def fit_pose_and_stretch(camera: Camera, camera_from_world: np.ndarray, world: n
     Js[0::2, 0], Js[0::2, 1] = d[:, 0], d[:, 1]
     Js[1::2, 1], Js[1::2, 2] = d[:, 0], d[:, 1]
     dist = camera.dist.reshape(-1)
+    lam = pixel_sigma / prior
+    # the system [J_pose J_s; 0 lam I] step = -[r; lam s], built once; each iteration fills in its parts
+    J = np.zeros((2 * n + 3, 9))
+    J[:2 * n, 6:] = Js
+    J[2 * n:, 6:] = lam * np.eye(3)
+    rhs = np.empty(2 * n + 3)
     for _ in range(iterations):
         proj, jac = cv2.projectPoints(world, rvec, tvec, camera.K, dist)
         S = np.array([[s[0], s[1]], [s[1], s[2]]])
         r = (proj.reshape(-1, 2) - (img - d @ S.T)).reshape(-1)
-        lam = pixel_sigma / prior
-        J = np.vstack([np.hstack([jac[:, :6], Js]), np.hstack([np.zeros((3, 6)), lam * np.eye(3)])])
-        step = np.linalg.lstsq(J, -np.concatenate([r, lam * s]), rcond=None)[0]
+        J[:2 * n, :6] = jac[:, :6]
+        rhs[:2 * n] = -r
+        rhs[2 * n:] = -(lam * s)
+        step = np.linalg.lstsq(J, rhs, rcond=None)[0]
         rvec, tvec, s = rvec + step[:3], tvec + step[3:6], s + step[6:]
         if np.abs(step).max() < 1e-9:
             break

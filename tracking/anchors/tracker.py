@@ -362,24 +362,25 @@ class AnchorTracker:
             self._prev_pts = (self._last_pts, self._last_pts_t)
             self._prev_fields, self._fields = self._fields, {}
         prev, prev_t = self._prev_pts
-        self._last_pts = {(ob.anchor, *np.round(o * 1e5).astype(int)): px
-                          for ob in obs for o, px in zip(ob.obj, ob.img)}
+        # a point's key: its anchor and its object coordinates in 10 um steps (python ints, one conversion)
+        keys_of = [[(ob.anchor, *k) for k in np.round(ob.obj * 1e5).astype(int).tolist()] for ob in obs]
+        self._last_pts = {k: px for ob, keys in zip(obs, keys_of) for k, px in zip(keys, ob.img)}
         self._last_pts_t = t
         dt = t - prev_t if prev_t is not None else 0.0
         if not prev or not 0 < dt <= 0.1:
             return obs
         out = []
-        for ob in obs:
-            keys = [(ob.anchor, *np.round(o * 1e5).astype(int)) for o in ob.obj]
+        for ob, keys in zip(obs, keys_of):
             seen = np.array([k in prev for k in keys])
             if seen.sum() < 3:
                 out.append(ob)
                 continue
             img = np.asarray(ob.img, float)
             vel = (img[seen] - np.array([prev[k] for k, s in zip(keys, seen) if s])) / dt
-            X = np.c_[img[seen], np.ones(int(seen.sum()))]
+            X = np.column_stack([img[seen], np.ones(int(seen.sum()))])
             A, *_ = np.linalg.lstsq(X, vel, rcond=None)
-            vel_all = np.c_[img, np.ones(len(img))] @ A
+            img1 = np.column_stack([img, np.ones(len(img))])
+            vel_all = img1 @ A
             self._fields[ob.anchor] = (A, dt)
             before = self._prev_fields.get(ob.anchor)
             d = cam.readout * ((img[:, 1] + 0.5) / cam.height - 0.5)
@@ -388,7 +389,7 @@ class AnchorTracker:
                 # row, d after their frame time); the stretch the point is moved back over, from t + d to
                 # t, needs it at its middle, t + d/2: (dt - d)/2 later. The change from the last frame's
                 # difference, (dt + dt_before)/2 earlier, carries it on there.
-                vel_before = np.c_[img, np.ones(len(img))] @ before[0]
+                vel_before = img1 @ before[0]
                 vel_all = vel_all + ((dt - d) / (dt + before[1]))[:, None] * (vel_all - vel_before)
             out.append(Observation(ob.anchor, ob.obj, img - vel_all * d[:, None], ob.groups, ob.markers,
                                    square=ob.square))
