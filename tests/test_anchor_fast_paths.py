@@ -19,10 +19,16 @@ def test_percentiles_from_a_histogram_equal_numpys():
 
 def test_top_percentile_equals_numpys():
     rng = np.random.default_rng(4)
-    for n in (1, 2, 3, 99, 100, 101, 5000):
+    for n in (1, 2, 3, 99, 100, 101, 2047, 2048, 5000, 40001):
         v = np.abs(rng.normal(size=n)) * 40.0
-        for q in (0, 1, 50, 99, 100):
+        if n == 40001:
+            v[: n // 2] = np.round(v[: n // 2])   # ties at the sample's bound
+        for q in (0, 1, 50, 97, 99, 99.9, 100):
             assert _top_percentile(v, q) == np.percentile(v, q), (n, q)
+    # large values only where the strided sample looks: its bound leaves out too many, the whole array is used
+    v = np.zeros(4096)
+    v[::16] = np.arange(256) + 1.0
+    assert _top_percentile(v, 99) == np.percentile(v, 99)
 
 
 def _edge_sharpness_plain(gray, pixels, direction):

@@ -248,12 +248,25 @@ def _level_percentiles(image: np.ndarray, qs) -> list[float]:
 
 
 def _top_percentile(values: np.ndarray, q: float) -> float:
-    """np.percentile(values, q) of a 1-D float array, partitioning at just the two order statistics used."""
+    """np.percentile(values, q) of a 1-D float array, partitioning at just the two order statistics used,
+    and for a high q over many values only among those at or above a bound taken from a sample."""
     n = len(values)
     virtual = (n - 1) * (q / 100)
     k = int(min(max(np.floor(virtual), 0), n - 1))
-    part = np.partition(values, [k, min(k + 1, n - 1)])
-    return _linear_percentile(n, q, lambda j: part[j])
+    k1 = min(k + 1, n - 1)
+    if n >= 2048 and q >= 50:
+        # every value left out is below every value kept, so the k-th smallest is the (k - below)-th
+        # smallest kept one, as long as no more than k are left out (else: the whole array)
+        sample = values[::16]
+        j = int((len(sample) - 1) * (q - 2) / 100)
+        bound = np.partition(sample, j)[j]
+        kept = values[values >= bound]
+        below = n - len(kept)
+        if below <= k:
+            part = np.partition(kept, [k - below, k1 - below])
+            return _linear_percentile(n, q, lambda i: part[i - below])
+    part = np.partition(values, [k, k1])
+    return _linear_percentile(n, q, lambda i: part[i])
 
 
 def edge_sharpness(gray: np.ndarray, pixels: np.ndarray, direction: np.ndarray) -> float:
