@@ -43,6 +43,13 @@ def _distort(camera: Camera, und: np.ndarray) -> np.ndarray:
     return px.reshape(-1, 2)
 
 
+def _sum16(v: np.ndarray) -> np.ndarray:
+    """v.sum(axis=0) of 16 rows added as numpy adds 16 contiguous values (eight running sums, then
+    combined pairwise), so that a (16, ...) layout gives the numbers a (..., 16) one did."""
+    p = v[:8] + v[8:]
+    return ((p[0] + p[1]) + (p[2] + p[3])) + ((p[4] + p[5]) + (p[6] + p[7]))
+
+
 def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, camera: Camera | None = None,
                    min_contrast: float = 8.0, consensus_px: float | None = None,
                    end_margin: float | np.ndarray = 0.2,
@@ -117,11 +124,8 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
         # the trapezoid rule gets right on interpolated samples (a gradient peak would snap to pixels).
         lo, hi = vals[0], vals[-1]
         contrast = hi - lo
-        # the trapezoid rule over s in [-r, r] (np.trapezoid's terms, summed in numpy's pairwise order
-        # for 16 terms: eight running sums, then combined pairwise)
-        e = dx * (vals[1:] + vals[:-1]) / 2.0
-        p = e[:8] + e[8:]
-        area = (((p[0] + p[1]) + (p[2] + p[3])) + ((p[4] + p[5]) + (p[6] + p[7]))) * rr
+        # the trapezoid rule over s in [-r, r] (np.trapezoid's 16 terms, summed in its order)
+        area = _sum16(dx * (vals[1:] + vals[:-1]) / 2.0) * rr
         with np.errstate(divide="ignore", invalid="ignore"):
             sc = (rr * (hi + lo) - area) / contrast
         mono = np.abs(np.diff(vals, axis=0)).max(axis=0) <= np.abs(contrast) * 0.6 + 2.0
@@ -145,23 +149,32 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
             wgt = wgt * _consensus(pts, strong, consensus_px)
         else:
             wgt = wgt * np.where(only[:, None, None], strong, True)
+    # the fit's arrays laid out (sample, marker, side), x and y apart (long rows for numpy again); sums over
+    # the samples in numpy's own order for the (M,4,ns) layout: sequential where it summed over a middle
+    # axis, pairwise (_sum16) where over the last one
+    X = np.ascontiguousarray(np.moveaxis(pts[..., 0], -1, 0))
+    Y = np.ascontiguousarray(np.moveaxis(pts[..., 1], -1, 0))
+    W = np.ascontiguousarray(np.moveaxis(wgt, -1, 0))
     for _ in range(2):
-        cnt = wgt.sum(axis=-1)  # (M,4)
-        c = (pts * wgt[..., None]).sum(axis=2) / np.maximum(cnt, 1)[..., None]
-        dp = (pts - c[:, :, None, :]) * wgt[..., None]
-        sxx = (dp[..., 0] ** 2).sum(-1)
-        syy = (dp[..., 1] ** 2).sum(-1)
-        sxy = (dp[..., 0] * dp[..., 1]).sum(-1)
+        cnt = W.sum(axis=0)  # (M,4)
+        cx = (X * W).sum(axis=0) / np.maximum(cnt, 1)
+        cy = (Y * W).sum(axis=0) / np.maximum(cnt, 1)
+        dx_ = (X - cx) * W
+        dy_ = (Y - cy) * W
+        sxx = _sum16(dx_ ** 2)
+        syy = _sum16(dy_ ** 2)
+        sxy = _sum16(dx_ * dy_)
         # normal = eigenvector of the scatter matrix with the smaller eigenvalue
         theta = 0.5 * np.arctan2(2 * sxy, sxx - syy)  # direction of the line
-        nvec = np.stack([-np.sin(theta), np.cos(theta)], axis=-1)  # (M,4,2)
-        res = np.abs((pts[..., 0] - c[:, :, None, 0]) * nvec[:, :, None, 0]
-                     + (pts[..., 1] - c[:, :, None, 1]) * nvec[:, :, None, 1])
-        masked = np.sort(np.where(wgt > 0, res, np.inf), axis=-1).reshape(-1, ns)
-        mid = np.minimum(np.maximum((cnt.astype(int) - 1) // 2, 0), ns - 1).ravel()
-        rmed = np.where(cnt > 0, masked[np.arange(len(mid)), mid].reshape(cnt.shape), 0.0)
-        wgt = wgt * (res <= np.maximum(3.0 * 1.4826 * rmed, 0.1)[..., None])
-    cnt = wgt.sum(axis=-1)
+        nx, ny = -np.sin(theta), np.cos(theta)
+        res = np.abs((X - cx) * nx + (Y - cy) * ny)
+        masked = np.sort(np.where(W > 0, res, np.inf), axis=0)
+        mid = np.minimum(np.maximum((cnt.astype(int) - 1) // 2, 0), ns - 1)
+        rmed = np.where(cnt > 0, np.take_along_axis(masked, mid[None], 0)[0], 0.0)
+        W = W * (res <= np.maximum(3.0 * 1.4826 * rmed, 0.1))
+    cnt = W.sum(axis=0)
+    nvec = np.stack([nx, ny], axis=-1)  # (M,4,2)
+    c = np.stack([cx, cy], axis=-1)
     side_ok = cnt >= 5
     # corner k = intersection of side k-1 and side k: n1.x = n1.c1, n2.x = n2.c2
     n1, n2 = nvec[:, _PREV], nvec
