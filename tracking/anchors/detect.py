@@ -45,6 +45,12 @@ class Observation:
     square: bool = False  # the 4 corners of one square marker (IPPE_SQUARE applies)
 
 
+def _shortest_side(quads: np.ndarray) -> np.ndarray:
+    """Each quad's (M,4,2) shortest side, pixels (as np.linalg.norm computes the lengths)."""
+    d = quads - quads[:, [3, 0, 1, 2]]
+    return np.sqrt(np.add.reduce(d * d, axis=2)).min(axis=1)
+
+
 class ArucoDetection:
     """Finds the ArUco markers (and ChArUco corners) of the anchors; one OpenCV detector per dictionary."""
 
@@ -76,6 +82,7 @@ class ArucoDetection:
                 cp.minMarkers = 1
                 self.charuco[m.index] = cv2.aruco.CharucoDetector(m.board, cp, params)
         self.last_foreign = 0  # markers of the right dictionaries but ids of no anchor, last frame
+        self._world_cache: dict = {}  # (anchor, id) -> (world_from_anchor bytes, world corners): _world_corners
 
     def detect(self, gray: np.ndarray, roi: tuple[int, int, int, int] | None = None) -> list[Observation]:
         """Observations of the ArUco-based anchors in `gray`, optionally only inside roi=(x0, y0, x1, y1)."""
@@ -90,12 +97,14 @@ class ArucoDetection:
             corners, ids, _ = det.detectMarkers(gray)
             if ids is None:
                 continue
-            for c, mid in zip(corners, ids.ravel()):
-                m = self.by_dict[d].get(int(mid))
+            # all markers' corners in full-image pixels at once
+            quads_all = np.concatenate(corners).reshape(-1, 4, 2).astype(np.float64) + [x0, y0]
+            for c, mid in zip(quads_all, ids.ravel().tolist()):
+                m = self.by_dict[d].get(mid)
                 if m is None:
                     foreign += 1
                     continue
-                per_anchor.setdefault(m.index, []).append((int(mid), c.reshape(4, 2).astype(np.float64) + [x0, y0], d))
+                per_anchor.setdefault(m.index, []).append((mid, c, d))
         self.last_foreign = foreign
         out = []
         for m in self.models:
@@ -108,7 +117,7 @@ class ArucoDetection:
             if not found:
                 continue
             quads = np.array([c for _, c, _ in found])
-            side = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).min(axis=1)
+            side = _shortest_side(quads)
             cell = side / np.array([self.bits[d] for _, _, d in found])
             refined, ok = refine_squares(full, quads, cell, self.camera, **self._edge_span([m] * len(quads)))
             if not ok.all():
@@ -152,12 +161,12 @@ class ArucoDetection:
         if any(by_index[a].anchor_kind.detector == "charuco" for a, _ in keys if a in by_index):
             return None
         keys = [(a, mid) for a, mid in keys if a in by_index]
-        world = np.concatenate([by_index[a].to_world(by_index[a].markers[mid]) for a, mid in keys])
+        world = np.concatenate(self._world_corners(by_index, keys))
         px, z = project(self.camera, camera_from_world, world)
         if np.any(z <= 0.01):
             return None
         quads = px.reshape(-1, 4, 2)
-        side = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).min(axis=1)
+        side = _shortest_side(quads)
         cell = side / np.array([self.bits[by_index[a].spec.dictionary] for a, _ in keys])
         refined, ok = refine_squares(gray, quads, cell, self.camera, **self._edge_span([by_index[a] for a, _ in keys]))
         if ok.sum() < max(1, min_fraction * len(keys)):
@@ -174,6 +183,18 @@ class ArucoDetection:
                 img = np.concatenate([q for _, q in found])
                 out.append(Observation(m.index, obj, img, np.repeat([mid for mid, _ in found], 4), len(found),
                                        square=m.anchor_kind.single_square))
+        return out
+
+    def _world_corners(self, by_index: dict, keys: list[tuple[int, int]]) -> list[np.ndarray]:
+        """Each marker's (anchor, id) corners (4,3) in world metres, as AnchorModel.to_world gives them;
+        kept between frames while the anchor's world_from_anchor stays the same."""
+        placed = {a: np.asarray(by_index[a].world_from_anchor, dtype=float).tobytes() for a in {a for a, _ in keys}}
+        out = []
+        for a, mid in keys:
+            hit = self._world_cache.get((a, mid))
+            if hit is None or hit[0] != placed[a]:
+                hit = self._world_cache[(a, mid)] = (placed[a], by_index[a].to_world(by_index[a].markers[mid]))
+            out.append(hit[1])
         return out
 
     def _charuco(self, m: AnchorModel, gray, found) -> Observation | None:

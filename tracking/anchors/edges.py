@@ -43,6 +43,20 @@ def _distort(camera: Camera, und: np.ndarray) -> np.ndarray:
     return px.reshape(-1, 2)
 
 
+def _per_quad(value, m: int, dtype) -> np.ndarray:
+    """A scalar or (m,) argument as an (m,) array."""
+    a = np.asarray(value, dtype=dtype)
+    return a if a.shape == (m,) else np.broadcast_to(a, (m,))
+
+
+_ARANGE = np.arange(4 * 64)
+
+
+def _arange(n: int) -> np.ndarray:
+    """np.arange(n), from a kept one when short."""
+    return _ARANGE[:n] if n <= len(_ARANGE) else np.arange(n)
+
+
 def _sum16(v: np.ndarray) -> np.ndarray:
     """v.sum(axis=0) of 16 rows added as numpy adds 16 contiguous values (eight running sums, then
     combined pairwise), so that a (16, ...) layout gives the numbers a (..., 16) one did."""
@@ -71,7 +85,7 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
     (a side off the image or without contrast) are returned unchanged with ok False.
     """
     quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)
-    cell_px = np.broadcast_to(np.asarray(cell_px, dtype=np.float64), (len(quads),))
+    cell_px = _per_quad(cell_px, len(quads), np.float64)
     out = quads.copy()
     ok = np.zeros(len(quads), bool)
     if len(quads) == 0:
@@ -92,7 +106,7 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
     b = quads[:, _NEXT]
     length = np.linalg.norm(b - a, axis=2)  # (M,4)
     ns = _NS
-    em = np.broadcast_to(np.asarray(end_margin, dtype=np.float64), (len(quads),))
+    em = _per_quad(end_margin, len(quads), np.float64)
     t = em[:, None] + (1.0 - 2.0 * em[:, None]) * _ALONG[None, :]  # (M,ns)
     steps = _ACROSS  # fractions of r
     d = (b - a) / np.maximum(length[..., None], 1e-9)
@@ -118,8 +132,8 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
                          cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(gx.shape).astype(np.float64)
         # each window is a straight run of samples, monotonic in x and in y (rounding included): it lies
         # inside the image when both of its ends do
-        inside = ((gx[0] >= 0) & (gx[0] <= w - 1) & (gx[-1] >= 0) & (gx[-1] <= w - 1)
-                  & (gy[0] >= 0) & (gy[0] <= h - 1) & (gy[-1] >= 0) & (gy[-1] <= h - 1))  # (M,4,ns)
+        inside = ((np.minimum(gx[0], gx[-1]) >= 0) & (np.maximum(gx[0], gx[-1]) <= w - 1)
+                  & (np.minimum(gy[0], gy[-1]) >= 0) & (np.maximum(gy[0], gy[-1]) <= h - 1))  # (M,4,ns)
         # Edge position = centroid of |dI/ds|; by parts it is a ratio of areas under the profile, which
         # the trapezoid rule gets right on interpolated samples (a gradient peak would snap to pixels).
         lo, hi = vals[0], vals[-1]
@@ -140,7 +154,7 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
         pts = camera.undistort_points(pts)
     pts = pts.reshape(M, 4, ns, 2)
     wgt = valid.astype(np.float64)
-    only = np.broadcast_to(np.asarray(strong_only, dtype=bool), (M,))
+    only = _per_quad(strong_only, M, bool)
     if consensus_px is not None or only.any():
         # a finger over the edge leaves a step from black to skin, well short of black to paper
         typical = np.array([np.median(np.abs(contrast[m][valid[m]])) if valid[m].any() else 0.0 for m in range(M)])
@@ -170,7 +184,7 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
         res = np.abs((X - cx) * nx + (Y - cy) * ny)
         masked = np.sort(np.where(W > 0, res, np.inf), axis=0)
         mid = np.minimum(np.maximum((cnt.astype(int) - 1) // 2, 0), ns - 1)
-        rmed = np.where(cnt > 0, np.take_along_axis(masked, mid[None], 0)[0], 0.0)
+        rmed = np.where(cnt > 0, masked.reshape(ns, -1)[mid.ravel(), _arange(mid.size)].reshape(mid.shape), 0.0)
         W = W * (res <= np.maximum(3.0 * 1.4826 * rmed, 0.1))
     cnt = W.sum(axis=0)
     nvec = np.stack([nx, ny], axis=-1)  # (M,4,2)
