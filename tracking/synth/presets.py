@@ -314,7 +314,7 @@ PRESETS.update(TEST_PRESETS)
 
 # Extra fast-pan tuning scenes (stop 15): rendered on demand (`arapp synth xt_fast_pan_f --out DIR`), not
 # bundled (the tests and benchmarks do not run on them, and the repository keeps its size). They were made
-# from the test recording's written description with fresh seeds (scene 311-314, desk 411-414) to judge the
+# from the test recording's written description with fresh seeds (scene 311-318, desk 411-418) to judge the
 # flow's changes on more than five pans; they are tuning data like the rest.
 EXTRA_TUNING: dict[str, dict] = {
     "xt_fast_pan_f": _fast_pan_twin(
@@ -332,6 +332,24 @@ EXTRA_TUNING: dict[str, dict] = {
     "xt_fast_pan_i": _fast_pan_twin(
         "xt_fast_pan_i", 314, 414, hfov_deg=60, dist=[-0.085, 0.04, -0.0004, -0.0004, 0.0], board=(4, 3, 0.036, 0.008, 24),
         pan={"azimuth": -97, "distance": 0.48, "elevation": 60, "pan_deg": 20, "cycles": 1.25,
+             "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.5}}),
+    # j-m (scene 315-318, desk 415-418): j's board comes back as one sharp marker at a pan's turn, which took
+    # over from the flow on its other tilt, 62 mm off
+    "xt_fast_pan_j": _fast_pan_twin(
+        "xt_fast_pan_j", 315, 415, hfov_deg=61, dist=[-0.075, 0.04, 0.0005, -0.0002, 0.0], board=(4, 3, 0.035, 0.008, 38),
+        pan={"azimuth": -105, "distance": 0.48, "elevation": 62, "pan_deg": 20, "cycles": 1.25,
+             "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.5}}),
+    "xt_fast_pan_k": _fast_pan_twin(
+        "xt_fast_pan_k", 316, 416, hfov_deg=62, dist=[-0.08, 0.04, -0.0005, 0.0005, 0.0], board=(4, 3, 0.035, 0.008, 5),
+        pan={"azimuth": -85, "distance": 0.5, "elevation": 58, "pan_deg": 21, "cycles": 1.25,
+             "shake": {"pos_mm": 2.6, "rot_deg": 0.55, "freq_hz": 2.7}}),
+    "xt_fast_pan_l": _fast_pan_twin(
+        "xt_fast_pan_l", 317, 417, hfov_deg=60, dist=[-0.07, 0.035, 0.0002, 0.0005, 0.0], board=(4, 3, 0.034, 0.008, 16),
+        pan={"azimuth": -95, "distance": 0.47, "elevation": 61, "pan_deg": 20, "cycles": 1.3,
+             "shake": {"pos_mm": 2.4, "rot_deg": 0.45, "freq_hz": 2.4}}),
+    "xt_fast_pan_m": _fast_pan_twin(
+        "xt_fast_pan_m", 318, 418, hfov_deg=62, dist=[-0.08, 0.04, 0.0005, -0.0005, 0.0], board=(4, 3, 0.035, 0.008, 28),
+        pan={"azimuth": -90, "distance": 0.48, "elevation": 60, "pan_deg": 20, "cycles": 1.25,
              "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.5}}),
 }
 
