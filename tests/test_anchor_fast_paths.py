@@ -61,3 +61,23 @@ def test_edge_sharpness_equals_the_plain_computation():
         assert a == b, (k, a, b)
     flat = np.full((100, 100), 90, np.uint8)
     assert np.isnan(edge_sharpness(flat, np.array([[10.0, 10.0], [60.0, 60.0]]), np.array([1.0, 0.0])))
+
+
+def test_median_and_row_norms_equal_numpys():
+    from tracking.anchors.numeric import median, row_norms
+
+    rng = np.random.default_rng(6)
+    for n in list(range(1, 12)) + [48, 101]:
+        for k in range(6):
+            v = rng.normal(size=n) * 10
+            if k == 1:
+                v = np.round(v)            # ties
+            if k == 2 and n > 2:
+                v[1] = np.nan
+            a, b = np.median(v), median(v)
+            assert (a == b or (np.isnan(a) and np.isnan(b))) and type(a) is type(b), (n, k, a, b)
+            w = rng.normal(size=(n, 2))
+            if k == 3:
+                w[0, 1] = np.nan
+            assert np.array_equal(np.median(w, axis=0), median(w), equal_nan=True), (n, k)
+            assert np.array_equal(np.linalg.norm(w, axis=1), row_norms(w), equal_nan=True), (n, k)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from tracking.anchors.numeric import median
 from tracking.camera import Camera
 
 MIN_MARKERS = 5   # whole markers (4 inlier corners each) needed: with 3-4 at an image edge the fit went wrong
@@ -60,7 +61,7 @@ def spread_enough(img: np.ndarray, groups: np.ndarray, min_spread: float = MIN_S
     r2 = np.bincount(inv, weights=((img - centres[inv]) ** 2).sum(axis=1), minlength=len(counts))
     sizes = np.sqrt(2.0 * r2[counts == 4] / 4.0)
     minor = np.sqrt(max(np.linalg.eigvalsh(np.cov(centres[counts == 4].T))[0], 0.0))
-    return bool(minor >= min_spread * float(np.median(sizes)))
+    return bool(minor >= min_spread * float(median(sizes)))
 
 
 def fit_pose_and_stretch(camera: Camera, camera_from_world: np.ndarray, world: np.ndarray, img: np.ndarray,

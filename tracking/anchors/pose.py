@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from tracking.anchors.detect import Observation
+from tracking.anchors.numeric import median, row_norms
 from tracking.camera import Camera
 from tracking.poses import from_rvec_tvec, invert, rotation_angle, to_rvec_tvec
 
@@ -22,16 +23,21 @@ _LM_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 1e-10)
 def project(camera: Camera, camera_from_world: np.ndarray, world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(pixels (N,2), depth (N,)) of world points under a camera_from_world pose (distortion applied)."""
     pc = world @ camera_from_world[:3, :3].T + camera_from_world[:3, 3]
+    return project_pixels(camera, camera_from_world, world), pc[:, 2]
+
+
+def project_pixels(camera: Camera, camera_from_world: np.ndarray, world: np.ndarray) -> np.ndarray:
+    """project()'s pixels (N,2) alone (no depths)."""
     rvec, tvec = to_rvec_tvec(camera_from_world)
     px, _ = cv2.projectPoints(world.reshape(-1, 1, 3), rvec, tvec, camera.K, camera.dist)
-    return px.reshape(-1, 2), pc[:, 2]
+    return px.reshape(-1, 2)
 
 
 def residuals(camera: Camera, camera_from_world: np.ndarray, world: np.ndarray, img: np.ndarray,
               behind: float = 1e6) -> np.ndarray:
     """Reprojection error in pixels per point; points behind the camera get `behind`."""
     px, z = project(camera, camera_from_world, world)
-    r = np.linalg.norm(px - img, axis=1)
+    r = row_norms(px - img)
     r[z <= 1e-6] = behind
     return r
 
@@ -135,11 +141,12 @@ def solve_pose(observations: list[Observation], world_from_anchor: list[np.ndarr
     _, group_of, group_size = np.unique(group, return_inverse=True, return_counts=True)
     small = group_size <= 4
     for thresh in (outlier_px, None):
-        r = residuals(camera, pose, world, img)
+        # (the first pass's errors are the chosen hypothesis's, already at hand)
+        r = errors[best] if thresh is not None else residuals(camera, pose, world, img)
         if thresh is None:
             # second pass: a data-driven threshold (4 robust sigmas), never below 1 px nor above outlier_px
-            sigma = 1.4826 * np.median(r[inl]) if inl.any() else outlier_px
-            thresh = float(np.clip(4.0 * sigma, 1.0, outlier_px))
+            sigma = 1.4826 * median(r[inl]) if inl.any() else outlier_px
+            thresh = float(min(max(4.0 * sigma, 1.0), outlier_px))
         new = r < thresh
         kept = np.bincount(group_of, weights=new, minlength=len(group_size))
         new &= ~(small & (kept * 2 < group_size))[group_of]
@@ -156,9 +163,12 @@ def solve_pose(observations: list[Observation], world_from_anchor: list[np.ndarr
     rms = float(np.sqrt(np.mean(r ** 2)))
     used = set(group[inl].tolist())
     markers = 0
-    anchors = sorted({ob.anchor for ob, g in zip(observations, groups) if np.isin(g, list(used)).any()})
+    anchors = set()
     for ob, g in zip(observations, groups):
-        if np.isin(g, list(used)).any():
+        hit = {x for x in g.tolist() if x in used}
+        if hit:
+            anchors.add(ob.anchor)
             # boards count their markers; ChArUco corners count as the markers that located them
-            markers += ob.markers if (ob.groups < 0).all() else len(set(g[np.isin(g, list(used))].tolist()))
+            markers += ob.markers if (ob.groups < 0).all() else len(hit)
+    anchors = sorted(anchors)
     return PoseSolution(pose, world[inl], img[inl], inl, rms, markers, anchors, branches)

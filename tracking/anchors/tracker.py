@@ -16,7 +16,8 @@ from tracking.anchors.edges import edge_sharpness, refine_squares
 from tracking.anchors.filter import PoseFilter
 from tracking.anchors.model import AnchorModel, build_models, square_corners
 from tracking.anchors.occlusion import covered_fraction, is_covered
-from tracking.anchors.pose import planar_solutions, project, residuals, solve_pose
+from tracking.anchors.numeric import median, row_norms
+from tracking.anchors.pose import planar_solutions, project, project_pixels, residuals, solve_pose
 from tracking.anchors.qr import QRTracking
 from tracking.camera import Camera
 from tracking.poses import from_rvec_tvec, invert, rotation_angle, transform_points
@@ -211,7 +212,7 @@ class AnchorTracker:
         if not self.filter.initialised:
             return 1.0
         world = np.asarray(sol.world, float)
-        motion = np.median(self._project_world(world, raw) - self._project_world(world, self.filter.pose()), axis=0)
+        motion = median(self._project_world(world, raw) - self._project_world(world, self.filter.pose()))
         if np.linalg.norm(motion) < self.smear_px:
             return 1.0
         sharp = edge_sharpness(gray, np.asarray(sol.img, float), motion)
@@ -274,7 +275,7 @@ class AnchorTracker:
         res = AnchorResult()
         if sol is not None:
             raw = sol.world_from_camera
-            depth = float(np.median((sol.world @ sol.camera_from_world[:3, :3].T + sol.camera_from_world[:3, 3])[:, 2]))
+            depth = float(median((sol.world @ sol.camera_from_world[:3, :3].T + sol.camera_from_world[:3, 3])[:, 2]))
             # The measurement's noise in radians: pixel noise (the residual corrected for the 6 pose
             # parameters, at least 0.1 px) over the points' extent, times the lever f/extent that makes
             # out-of-plane tilt and depth of a small target uncertain, fewer with more points.
@@ -329,8 +330,8 @@ class AnchorTracker:
         markers = marker_groups(sol.img, groups)
         if int((markers[2] == 4).sum()) < MIN_MARKERS:
             return sol
-        moved = np.median(np.linalg.norm(self._project_world(sol.world, sol.world_from_camera)
-                                         - self._project_world(sol.world, self.filter.pose()), axis=1))
+        moved = median(row_norms(self._project_world(sol.world, sol.world_from_camera)
+                                    - self._project_world(sol.world, self.filter.pose())))
         if moved < self.unblur_px or not spread_enough(sol.img, groups, markers=markers):
             return sol
         offsets, _ = marker_offsets(sol.img, groups, markers=markers)
@@ -433,9 +434,9 @@ class AnchorTracker:
         (then motion blur, not a hand, is what lowers a margin's contrast: the smear weighting handles it)."""
         if pred_cfw is None or not self.filter.initialised:
             return False
-        now, _ = project(self.camera, pred_cfw, self._outlines)
-        last, _ = project(self.camera, invert(self.filter.pose()), self._outlines)
-        return bool(np.median(np.linalg.norm(now - last, axis=1)) >= self.smear_px)
+        now = project_pixels(self.camera, pred_cfw, self._outlines)
+        last = project_pixels(self.camera, invert(self.filter.pose()), self._outlines)
+        return bool(median(row_norms(now - last)) >= self.smear_px)
 
     def _drop_covered(self, gray: np.ndarray, obs: list[Observation], fast: bool = False,
                       pred_cfw: np.ndarray | None = None) -> tuple[list[Observation], set[int]]:
