@@ -81,3 +81,13 @@ def test_median_and_row_norms_equal_numpys():
                 w[0, 1] = np.nan
             assert np.array_equal(np.median(w, axis=0), median(w), equal_nan=True), (n, k)
             assert np.array_equal(np.linalg.norm(w, axis=1), row_norms(w), equal_nan=True), (n, k)
+
+
+def test_rotation_angle_equals_the_trace_formula():
+    from tracking.poses import rotation_angle
+
+    rng = np.random.default_rng(7)
+    for k in range(2000):
+        R = cv2.Rodrigues(rng.normal(size=3) * 10.0 ** rng.uniform(-9, 0.5))[0]
+        want = float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+        assert rotation_angle(R) == want, k

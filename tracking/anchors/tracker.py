@@ -311,8 +311,8 @@ class AnchorTracker:
             res.image_points = sol.img
             res.anchors_seen = sol.anchors
             self.last_raw = raw
-            self.tracked_keys = {(ob.anchor, int(g)) for ob in obs if ob.anchor in sol.anchors
-                                 and self.models[ob.anchor].anchor_kind.detector == "aruco" for g in np.unique(ob.groups)}
+            self.tracked_keys = {(ob.anchor, g) for ob in obs if ob.anchor in sol.anchors
+                                 and self.models[ob.anchor].anchor_kind.detector == "aruco" for g in ob.groups.tolist()}
         else:
             self.tracked_keys = set()
         res.rejected = rejected
