@@ -160,6 +160,7 @@ class AnchorTracker:
         self._state_sigma = float("inf")   # the best measurement noise (radians) the filter's state rests on
         self.tracked_keys: set[tuple[int, int]] = set()
         self.trusted: set[int] = set()   # anchors that have carried (or agreed with) the pose this session
+        self._projections: dict = {}     # this frame's _project_world results
 
     def _other_branch_wins(self, obs: list[Observation], sol) -> bool:
         """Accumulate evidence between the two IPPE branches when a single planar anchor carries the pose.
