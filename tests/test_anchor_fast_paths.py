@@ -91,3 +91,41 @@ def test_rotation_angle_equals_the_trace_formula():
         R = cv2.Rodrigues(rng.normal(size=3) * 10.0 ** rng.uniform(-9, 0.5))[0]
         want = float(np.arccos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
         assert rotation_angle(R) == want, k
+
+
+def test_tracker_caches_follow_their_inputs():
+    """The tracker's remembered computations (marker world corners between frames, projections within a
+    frame) give what computing afresh gives, also after the input changed (oracle: the plain calls)."""
+    from scenes import bundled_recording
+
+    from tracking.anchors.tracker import AnchorTracker
+
+    frames, session = bundled_recording("board_orbit", slice(0, 3))
+    at = AnchorTracker(session.anchors, session.camera)
+    for t, image, _ in frames:
+        res = at.process(image, t)
+    assert res.raw_world_from_camera is not None
+    det = at.aruco
+    model = det.models[0]
+    keys = [(model.index, mid) for mid in list(model.markers)[:3]]
+    by_index = {m.index: m for m in det.models}
+    first = det._world_corners(by_index, keys)
+    assert all(np.array_equal(w, model.to_world(model.markers[mid])) for w, (_, mid) in zip(first, keys))
+    # the anchor placed elsewhere: its markers' world corners move with it
+    moved = np.array(model.spec.world_from_anchor, dtype=float)
+    moved[:3, 3] += [0.01, -0.02, 0.03]
+    model.spec.world_from_anchor = moved
+    again = det._world_corners(by_index, keys)
+    assert all(np.array_equal(w, model.to_world(model.markers[mid])) for w, (_, mid) in zip(again, keys))
+    assert not np.array_equal(first[0], again[0])
+    # projections: another pose, or other points with the same values, are not answered from the memo
+    world = np.array(res.object_points, dtype=float)
+    pose = res.raw_world_from_camera
+    a = at._project_world(world, pose)
+    assert np.array_equal(a, session.camera.project_world(world, pose))
+    other = pose.copy()
+    other[0, 3] += 0.05
+    assert np.array_equal(at._project_world(world, other), session.camera.project_world(world, other))
+    shifted = world + [0.0, 0.0, 0.01]
+    assert np.array_equal(at._project_world(shifted, pose), session.camera.project_world(shifted, pose))
+    assert not np.array_equal(at._project_world(shifted, pose), a)
