@@ -77,6 +77,11 @@ PARTIAL_VIEW = 1.8
 # smeared markers caught mid-pan fit to ~1 px and read ~2 cm off at 0.5 m; a board that fits to 0.7 px
 # on seven markers, ~1 %, reads 2 mm off
 START_SPREAD = 0.015
+# `edge_sharpness` (about 1/pixels of smear) from which a board counts as sharp for START_SPREAD: only a
+# smeared board is held back (the next frames of a moving camera are sharper); a sharp one that fits poorly
+# (curved paper, a print's errors) fits no better a frame later and starts the pose. Sharp boards on the
+# tuning recordings measure 0.30-0.42 across x and y, the smeared starts of the fast pans 0.14-0.25.
+START_SHARP = 0.28
 FLOW_SEEDS = 300  # points followed by optical flow when the anchors and the map both fail
 
 
@@ -480,7 +485,7 @@ class Tracker:
         corners_w, corners_uv, markers = self._anchor_points(ar)
         if (len(corners_w) and (self._lost > 0 or self.motion.last is None)
                 and (self._too_smeared_to_start(ar, gray) or self._partial_view(ar)
-                     or self._start_uncertain(ar))):
+                     or self._start_uncertain(ar, gray))):
             corners_w, corners_uv = corners_w[:0], corners_uv[:0]   # the map may still relocalise
         pred = self.motion.predict(t)
         ids, X, D = self.map.arrays()
@@ -849,11 +854,12 @@ class Tracker:
             return None
         return np.asarray(pose, float), np.asarray(ar.object_points, float).reshape(-1, 3)
 
-    def _start_uncertain(self, ar) -> bool:
-        """Whether a board's pose this frame is expected to be off by more than `START_SPREAD` of the camera's
-        distance from it: the camera position's spread (`position_spread`) with the fit's own RMS residual,
-        scaled to the residual's degrees of freedom, as the pixel noise. Markers and QR codes (four corners
-        fit to a few hundredths of a pixel whatever their error) are left to `start_sharpness`."""
+    def _start_uncertain(self, ar, gray: np.ndarray | None = None) -> bool:
+        """Whether a smeared board's pose this frame is expected to be off by more than `START_SPREAD` of the
+        camera's distance from it: the camera position's spread (`position_spread`) with the fit's own RMS
+        residual, scaled to the residual's degrees of freedom, as the pixel noise. With `gray` (the frame),
+        boards whose edges are sharp across x and y (`START_SHARP`) are never held back. Markers and QR codes
+        (four corners fit to a few hundredths of a pixel whatever their error) are left to `start_sharpness`."""
         board = self._board_fit(ar)
         if board is None or len(board[1]) < 4 or not np.isfinite(ar.reprojection_error):
             return False
@@ -861,7 +867,13 @@ class Tracker:
         n = len(seen)
         sigma = ar.reprojection_error * np.sqrt(2 * n / max(2 * n - 6, 1))
         distance = float(np.linalg.norm(pose[:3, 3] - seen.mean(axis=0)))
-        return bool(position_spread(self.K, pose, seen, sigma) > START_SPREAD * distance)
+        if not position_spread(self.K, pose, seen, sigma) > START_SPREAD * distance:
+            return False
+        if gray is None:
+            return True
+        corners = np.asarray(ar.image_points, float).reshape(-1, 2)
+        sharp = [edge_sharpness(gray, corners, np.array(d)) for d in ((1.0, 0.0), (0.0, 1.0))]
+        return bool(min(sharp) < START_SHARP)   # NaN (unmeasurable) compares False: not held back
 
     @staticmethod
     def _fits_well(ar) -> bool:
