@@ -286,7 +286,8 @@ def test_a_seam_is_faded_only_where_the_view_moves_slowly(turn, flow_px, faded):
     with Tracker(PLAIN, anchors, threaded=False) as tr:
         start = look([0.0, -0.3, 0.4])
         for k in range(3):
-            tr.motion.update(start @ make_pose(cv2.Rodrigues(np.array([0.0, turn * k / 30, 0.0]))[0], np.zeros(3)), k / 30)
+            turned = cv2.Rodrigues(np.array([0.0, turn * k / 30, 0.0]))[0]
+            tr.motion.update(start @ make_pose(turned, np.zeros(3)), k / 30)
         t = 3 / 30
         pred = tr.motion.predict(t)
         tr._last_out, tr._source, tr._lost, tr._frame = tr.motion.last.copy(), "anchors", 0, 7

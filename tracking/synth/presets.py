@@ -316,41 +316,32 @@ PRESETS.update(TEST_PRESETS)
 # bundled (the tests and benchmarks do not run on them, and the repository keeps its size). They were made
 # from the test recording's written description with fresh seeds (scene 311-318, desk 411-418) to judge the
 # flow's changes on more than five pans; they are tuning data like the rest.
+# (name, scene seed, desk seed, hfov_deg, dist, (markers_x, markers_y, length m, separation m, first_id),
+#  azimuth deg, distance m, elevation deg, pan_deg, cycles, shake (pos_mm, rot_deg, freq_hz));
+# j's board comes back as one sharp marker at a pan's turn (it took over from the flow on its other tilt, 62 mm off)
+_EXTRA_PANS = [
+    ("xt_fast_pan_f", 311, 411, 62, [-0.07, 0.04, 0.0003, -0.0003, 0.0], (4, 3, 0.035, 0.008, 36),
+     -92, 0.48, 60, 20, 1.25, (2.5, 0.5, 2.6)),
+    ("xt_fast_pan_g", 312, 412, 61, [-0.08, 0.045, -0.0003, 0.0004, 0.0], (4, 3, 0.034, 0.008, 0),
+     -100, 0.47, 61, 21, 1.2, (2.4, 0.5, 2.4)),
+    ("xt_fast_pan_h", 313, 413, 63, [-0.075, 0.035, 0.0004, 0.0003, 0.0], (4, 3, 0.035, 0.009, 12),
+     -88, 0.49, 59, 19, 1.3, (2.6, 0.5, 2.5)),
+    ("xt_fast_pan_i", 314, 414, 60, [-0.085, 0.04, -0.0004, -0.0004, 0.0], (4, 3, 0.036, 0.008, 24),
+     -97, 0.48, 60, 20, 1.25, (2.5, 0.5, 2.5)),
+    ("xt_fast_pan_j", 315, 415, 61, [-0.075, 0.04, 0.0005, -0.0002, 0.0], (4, 3, 0.035, 0.008, 38),
+     -105, 0.48, 62, 20, 1.25, (2.5, 0.5, 2.5)),
+    ("xt_fast_pan_k", 316, 416, 62, [-0.08, 0.04, -0.0005, 0.0005, 0.0], (4, 3, 0.035, 0.008, 5),
+     -85, 0.5, 58, 21, 1.25, (2.6, 0.55, 2.7)),
+    ("xt_fast_pan_l", 317, 417, 60, [-0.07, 0.035, 0.0002, 0.0005, 0.0], (4, 3, 0.034, 0.008, 16),
+     -95, 0.47, 61, 20, 1.3, (2.4, 0.45, 2.4)),
+    ("xt_fast_pan_m", 318, 418, 62, [-0.08, 0.04, 0.0005, -0.0005, 0.0], (4, 3, 0.035, 0.008, 28),
+     -90, 0.48, 60, 20, 1.25, (2.5, 0.5, 2.5)),
+]
 EXTRA_TUNING: dict[str, dict] = {
-    "xt_fast_pan_f": _fast_pan_twin(
-        "xt_fast_pan_f", 311, 411, hfov_deg=62, dist=[-0.07, 0.04, 0.0003, -0.0003, 0.0], board=(4, 3, 0.035, 0.008, 36),
-        pan={"azimuth": -92, "distance": 0.48, "elevation": 60, "pan_deg": 20, "cycles": 1.25,
-             "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.6}}),
-    "xt_fast_pan_g": _fast_pan_twin(
-        "xt_fast_pan_g", 312, 412, hfov_deg=61, dist=[-0.08, 0.045, -0.0003, 0.0004, 0.0], board=(4, 3, 0.034, 0.008, 0),
-        pan={"azimuth": -100, "distance": 0.47, "elevation": 61, "pan_deg": 21, "cycles": 1.2,
-             "shake": {"pos_mm": 2.4, "rot_deg": 0.5, "freq_hz": 2.4}}),
-    "xt_fast_pan_h": _fast_pan_twin(
-        "xt_fast_pan_h", 313, 413, hfov_deg=63, dist=[-0.075, 0.035, 0.0004, 0.0003, 0.0], board=(4, 3, 0.035, 0.009, 12),
-        pan={"azimuth": -88, "distance": 0.49, "elevation": 59, "pan_deg": 19, "cycles": 1.3,
-             "shake": {"pos_mm": 2.6, "rot_deg": 0.5, "freq_hz": 2.5}}),
-    "xt_fast_pan_i": _fast_pan_twin(
-        "xt_fast_pan_i", 314, 414, hfov_deg=60, dist=[-0.085, 0.04, -0.0004, -0.0004, 0.0], board=(4, 3, 0.036, 0.008, 24),
-        pan={"azimuth": -97, "distance": 0.48, "elevation": 60, "pan_deg": 20, "cycles": 1.25,
-             "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.5}}),
-    # j-m (scene 315-318, desk 415-418): j's board comes back as one sharp marker at a pan's turn, which took
-    # over from the flow on its other tilt, 62 mm off
-    "xt_fast_pan_j": _fast_pan_twin(
-        "xt_fast_pan_j", 315, 415, hfov_deg=61, dist=[-0.075, 0.04, 0.0005, -0.0002, 0.0], board=(4, 3, 0.035, 0.008, 38),
-        pan={"azimuth": -105, "distance": 0.48, "elevation": 62, "pan_deg": 20, "cycles": 1.25,
-             "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.5}}),
-    "xt_fast_pan_k": _fast_pan_twin(
-        "xt_fast_pan_k", 316, 416, hfov_deg=62, dist=[-0.08, 0.04, -0.0005, 0.0005, 0.0], board=(4, 3, 0.035, 0.008, 5),
-        pan={"azimuth": -85, "distance": 0.5, "elevation": 58, "pan_deg": 21, "cycles": 1.25,
-             "shake": {"pos_mm": 2.6, "rot_deg": 0.55, "freq_hz": 2.7}}),
-    "xt_fast_pan_l": _fast_pan_twin(
-        "xt_fast_pan_l", 317, 417, hfov_deg=60, dist=[-0.07, 0.035, 0.0002, 0.0005, 0.0], board=(4, 3, 0.034, 0.008, 16),
-        pan={"azimuth": -95, "distance": 0.47, "elevation": 61, "pan_deg": 20, "cycles": 1.3,
-             "shake": {"pos_mm": 2.4, "rot_deg": 0.45, "freq_hz": 2.4}}),
-    "xt_fast_pan_m": _fast_pan_twin(
-        "xt_fast_pan_m", 318, 418, hfov_deg=62, dist=[-0.08, 0.04, 0.0005, -0.0005, 0.0], board=(4, 3, 0.035, 0.008, 28),
-        pan={"azimuth": -90, "distance": 0.48, "elevation": 60, "pan_deg": 20, "cycles": 1.25,
-             "shake": {"pos_mm": 2.5, "rot_deg": 0.5, "freq_hz": 2.5}}),
+    name: _fast_pan_twin(name, seed, desk, hfov_deg=hfov, dist=dist, board=board,
+                         pan={"azimuth": az, "distance": d, "elevation": el, "pan_deg": pan, "cycles": cyc,
+                              "shake": {"pos_mm": sh[0], "rot_deg": sh[1], "freq_hz": sh[2]}})
+    for name, seed, desk, hfov, dist, board, az, d, el, pan, cyc, sh in _EXTRA_PANS
 }
 
 
