@@ -444,7 +444,7 @@ class Tracker:
                 self._since_detect += 1
             usable = self._anchor_usable(ar) and self._plausible(self._anchor_output(ar), self.motion.last, t)
             # a board seen in part as it comes back (one marker at the image edge, sharp at a pan's turn) can
-            # read centimetres off, on the wrong one of its two tilts: it does not take over from the flow
+            # read centimetres off (its tilt and the camera's shift trade off): it does not take over from the flow
             if got is not None and (not usable or self._smeared(ar, got, gray, t) or self._partial_view(ar)
                                     or (self._jumped(ar, t) and self._flow_disagrees(ar, got, t))):
                 return self._flow_result(got, t, t0, int(ar.markers) if ar is not None else 0)

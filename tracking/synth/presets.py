@@ -318,7 +318,7 @@ PRESETS.update(TEST_PRESETS)
 # flow's changes on more than five pans; they are tuning data like the rest.
 # (name, scene seed, desk seed, hfov_deg, dist, (markers_x, markers_y, length m, separation m, first_id),
 #  azimuth deg, distance m, elevation deg, pan_deg, cycles, shake (pos_mm, rot_deg, freq_hz));
-# j's board comes back as one sharp marker at a pan's turn (it took over from the flow on its other tilt, 62 mm off)
+# j's board comes back as one sharp marker at a pan's turn (it took over from the flow, 62 mm off)
 _EXTRA_PANS = [
     ("xt_fast_pan_f", 311, 411, 62, [-0.07, 0.04, 0.0003, -0.0003, 0.0], (4, 3, 0.035, 0.008, 36),
      -92, 0.48, 60, 20, 1.25, (2.5, 0.5, 2.6)),
