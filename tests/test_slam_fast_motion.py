@@ -306,8 +306,9 @@ def test_a_board_coming_back_in_part_does_not_take_over_from_the_flow():
     shows two of its markers at the image edge, sharp. A pose on two markers there reads millimetres to
     centimetres off (5.3 mm measured here; 62 mm on an extra tuning pan, xt_fast_pan_j, whose lone
     returning marker took over); while the flow holds, such a partial view does not replace it
-    (`Tracker._partial_view`), and the board takes over once more of it is seen. Oracles: OpenCV's own detector for how many markers are in
-    view, the render's ground truth for the error (0.6 mm measured on the two-marker frame)."""
+    (`Tracker._partial_view`), and the board takes over once more of it is seen. Oracles: OpenCV's own
+    detector for how many markers are in view, the render's ground truth for the error (0.6 mm measured on
+    the two-marker frame)."""
     from scenes import board_scene_dict, render_sequence
 
     centre = [0.09, 0.05, 0.0]
