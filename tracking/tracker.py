@@ -52,7 +52,7 @@ import cv2
 import numpy as np
 
 from tracking.camera import Camera
-from tracking.poses import rotation_angle
+from tracking.poses import invert, rotation_angle
 from tracking.session import AnchorSpec
 from tracking.slam.features import FeatureExtractor, Features
 from tracking.anchors.edges import edge_sharpness
@@ -328,6 +328,7 @@ class Tracker:
         self._flow_start: float | None = None  # when flow alone began to carry the pose
         self._followed: tuple[int, tuple | None] | None = None   # (frame, `_follow_from_last`'s result there)
         self._anchor_corners: np.ndarray | None = None   # world corners (N,3) the anchors measured last
+        self._sharpness: tuple[int, float] | None = None   # (frame, `_start_sharpness` there)
 
     def reset(self) -> None:
         """Forget the map and the motion; the next frame starts from the anchors."""
@@ -719,9 +720,16 @@ class Tracker:
         them alone. Nothing says which way the camera moves yet, so both directions are measured."""
         if self.start_sharpness <= 0:
             return False
-        seen = np.asarray(ar.image_points, float).reshape(-1, 2)
-        sharp = [edge_sharpness(gray, seen, np.array(d)) for d in ((1.0, 0.0), (0.0, 1.0))]
-        return bool(min(sharp) < self.start_sharpness)   # NaN (unmeasurable) compares False: start
+        return bool(self._start_sharpness(ar, gray) < self.start_sharpness)   # NaN (unmeasurable): start
+
+    def _start_sharpness(self, ar, gray) -> float:
+        """The anchors' edge sharpness this frame (`edge_sharpness`), the lower of across x and across y;
+        measured once a frame for the start checks (`_too_smeared_to_start`, `_start_uncertain`)."""
+        if self._sharpness is None or self._sharpness[0] != self._frame:
+            seen = np.asarray(ar.image_points, float).reshape(-1, 2)
+            sharp = [edge_sharpness(gray, seen, np.array(d)) for d in ((1.0, 0.0), (0.0, 1.0))]
+            self._sharpness = (self._frame, min(sharp))
+        return self._sharpness[1]
 
     def _jumped(self, ar, t) -> bool:
         """Whether a corner of a lone marker (4 points: one wrong corner does not show in its reprojection
@@ -771,18 +779,18 @@ class Tracker:
     def _view_motion(self, pred: np.ndarray) -> float:
         """How far (pixels) the view moved since the last frame: the most of the motion model's (`pred`, the
         motion of five image points, the centre and halfway to each corner, at the depth of the world
-        origin) and, when the flow ran this frame, the median motion of its points. Not this frame's pose:
-        its motion holds the very step a seam is about."""
+        origin) and, when the flow ran this frame, its points' median motion (`Tracks.image_motion`). Not this
+        frame's pose: its motion holds the very step a seam is about."""
         followed = self._followed[1] if self._followed is not None and self._followed[0] == self._frame else None
-        flow = 0.0 if followed is None else float(np.median(np.linalg.norm(followed[1].moved, axis=1)))
-        return max(flow, self._model_motion(pred))
+        moved = None if followed is None else followed[1].image_motion()
+        return max(0.0 if moved is None else float(np.linalg.norm(moved)), self._model_motion(pred))
 
     def _model_motion(self, pose: np.ndarray) -> float:
         """Pixels the view moves from `motion.last` to `pose` (see `_view_motion`)."""
         w, h = self.camera.size
         px = np.array([[w / 2, h / 2], [w / 4, h / 4], [3 * w / 4, h / 4], [w / 4, 3 * h / 4], [3 * w / 4, 3 * h / 4]])
         last = self.motion.last
-        depth = max(float((np.linalg.inv(last) @ np.array([0.0, 0.0, 0.0, 1.0]))[2]), 0.05)
+        depth = max(float(invert(last)[2, 3]), 0.05)   # the world origin's depth in the camera
         world = self.camera.unproject(px, depth) @ last[:3, :3].T + last[:3, 3]
         return float(np.linalg.norm(self.camera.project_world(world, pose) - px, axis=1).max())
 
@@ -871,9 +879,7 @@ class Tracker:
             return False
         if gray is None:
             return True
-        corners = np.asarray(ar.image_points, float).reshape(-1, 2)
-        sharp = [edge_sharpness(gray, corners, np.array(d)) for d in ((1.0, 0.0), (0.0, 1.0))]
-        return bool(min(sharp) < START_SHARP)   # NaN (unmeasurable) compares False: not held back
+        return bool(self._start_sharpness(ar, gray) < START_SHARP)   # NaN (unmeasurable): not held back
 
     @staticmethod
     def _fits_well(ar) -> bool:
