@@ -77,6 +77,11 @@ class Camera:
         return bool(np.any(self.dist != 0))
 
     # -- projection ----------------------------------------------------------
+    def row_offsets(self, y: np.ndarray) -> np.ndarray:
+        """Seconds from the frame's time (its centre row's) at which image rows y (N,) were read out (all 0
+        with a global shutter)."""
+        return self.readout * ((np.asarray(y, float) + 0.5) / self.height - 0.5)
+
     def project(self, points_camera: np.ndarray) -> np.ndarray:
         """Pixels (..., 2) of camera-frame points (..., 3), distortion applied (as cv2.projectPoints)."""
         p = np.asarray(points_camera, dtype=float)

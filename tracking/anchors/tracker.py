@@ -385,7 +385,7 @@ class AnchorTracker:
             vel_all = img1 @ A
             self._fields[ob.anchor] = (A, dt)
             before = self._prev_fields.get(ob.anchor)
-            d = cam.readout * ((img[:, 1] + 0.5) / cam.height - 0.5)
+            d = cam.row_offsets(img[:, 1])
             if before is not None and seen.sum() >= self.deskew_extrapolate_min:
                 # the difference is the velocity at t - dt/2 + d (both detections were read at the point's
                 # row, d after their frame time); the stretch the point is moved back over, from t + d to

@@ -84,11 +84,6 @@ class Tracks:
         return int(self.xy.shape[0])
 
 
-def row_offsets(camera: Camera, y: np.ndarray) -> np.ndarray:
-    """Seconds from the frame's time (its centre row's) at which rows y (N,) were read out."""
-    return camera.readout * ((np.asarray(y, float) + 0.5) / camera.height - 0.5)
-
-
 def deskew(camera: Camera, xy: np.ndarray, velocity: np.ndarray | None) -> np.ndarray:
     """Distorted pixels xy (N,2) moved to where they would be at the frame's centre-row time, given
     their image velocity (N,2) pixels/s (first order); xy as they are without a rolling shutter or a
@@ -96,7 +91,7 @@ def deskew(camera: Camera, xy: np.ndarray, velocity: np.ndarray | None) -> np.nd
     xy = np.asarray(xy, float).reshape(-1, 2)
     if camera.readout <= 0 or velocity is None:
         return xy
-    return xy - np.asarray(velocity, float).reshape(-1, 2) * row_offsets(camera, xy[:, 1])[:, None]
+    return xy - np.asarray(velocity, float).reshape(-1, 2) * camera.row_offsets(xy[:, 1])[:, None]
 
 
 MIN_FIELD_POINTS = 24   # points a quadratic image-velocity field (6 coefficients a component) is fitted to
@@ -141,14 +136,14 @@ def _row_time_velocity(camera: Camera, before: np.ndarray, now: np.ndarray, ok: 
     centre, scale = camera.K[:2, 2], float(camera.K[0, 0])
     coef, *_ = np.linalg.lstsq(_quadratic_basis((now[ok] + before[ok]) / 2, centre, scale)[0], v[ok], rcond=None)
     _, dx, dy = _quadratic_basis(now, centre, scale)
-    shift = v * ((dt - row_offsets(camera, now[:, 1])) / 2)[:, None]   # from halfway along the path
+    shift = v * ((dt - camera.row_offsets(now[:, 1])) / 2)[:, None]   # from halfway along the path
     out = v + shift[:, :1] * (dx @ coef) + shift[:, 1:] * (dy @ coef)
     if before_velocity is not None:
         # the two path velocities are dt apart (the frame interval taken as steady); from the last one's
         # time (halfway along the path, t - dt/2 + d) to the middle of the deskew stretch (t + d/2) is
         # (dt - d) / 2
         had = np.isfinite(before_velocity).all(axis=1)
-        d = row_offsets(camera, now[had, 1])
+        d = camera.row_offsets(now[had, 1])
         out[had] = v[had] + (v[had] - before_velocity[had]) * ((dt - d) / (2 * dt))[:, None]
     return out
 
