@@ -25,11 +25,9 @@ for p in (str(ROOT), str(HERE)):
     if p not in sys.path:
         sys.path.insert(0, p)
 
-TUNING = ["board_orbit", "board_orbit_720p", "static_camera", "qr_anchor", "marker_occluded", "fast_motion",
-          "printer_bed", "tune_hand_border", "tune_hand_edge", "tune_hand_border_b", "tune_webcam_board", "tune_qr_webcam",
-          "tune_fast_pan", "tune_fast_pan_b", "tune_fast_pan_c", "tune_fast_pan_d",
-          "tune_fast_pan_e"]
-TEST = ["test_hand_border", "test_webcam_board", "test_qr_webcam", "test_fast_pan"]
+# the tuning and test recordings, as recordings/README.md and the synthesiser's presets list them
+from tracking.synth.presets import TEST, TUNING  # noqa: E402
+
 QR_TUNING = "qr_anchor"  # the plain way's QR call is chosen on this tuning recording
 WAYS = ("arapp", "raw", "plain", "plain_f")
 
