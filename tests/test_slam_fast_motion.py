@@ -127,7 +127,8 @@ def test_output_settles_on_a_board_soon_after_a_map_only_stretch(name):
     """When a board (12+ corners) is measured again after frames carried by the map or flow, the output fades
     from where it was over `precise_blend_frames` (5, starting on the return frame), not `blend_frames` (8):
     by the 4th frame after the return it is as close to the truth as the anchors alone (the tracker with
-    slam=False)."""
+    slam=False). (Some of those frames may be the flow's again: a board leaving the view as the pan turns
+    back reads worse than the flow one frame after it, `_flow_holds_better`.)"""
     frames, session = recording(name)
     with Tracker(session.camera, session.anchors, slam=False, filter=False) as tr:
         alone = run_tracker(tr, frames)["errors"]
@@ -136,7 +137,8 @@ def test_output_settles_on_a_board_soon_after_a_map_only_stretch(name):
         r = run_tracker(tr, frames)
     st, err = r["states"], r["errors"]
     k = 4
-    returns = [i for i in range(1, len(st) - k) if st[i - 1] == "slam" and all(s == "marker" for s in st[i:i + k + 1])]
+    returns = [i for i in range(1, len(st) - k) if st[i - 1] == "slam" and st[i] == st[i + 1] == "marker"
+               and "lost" not in st[i:i + k + 1]]
     assert returns
     for i in returns:
         assert err[i + k] <= alone[i + k] + 0.0015, (i, err[i:i + k + 1], alone[i:i + k + 1])
@@ -306,7 +308,9 @@ def test_a_board_coming_back_in_part_does_not_take_over_from_the_flow():
     shows two of its markers at the image edge, sharp. A pose on two markers there reads millimetres to
     centimetres off (5.3 mm measured here; 62 mm on an extra tuning pan, xt_fast_pan_j, whose lone
     returning marker took over); while the flow holds, such a partial view does not replace it
-    (`Tracker._partial_view`), and the board takes over once more of it is seen. Oracles: OpenCV's own
+    (`Tracker._partial_view`), and the board takes over once more of it is seen (at the end, where it
+    fits less well than a frame of flow after it is expected to hold, the flow may carry the last frames:
+    `_flow_holds_better`). Oracles: OpenCV's own
     detector for how many markers are in view, the render's ground truth for the error (0.6 mm measured on
     the two-marker frame)."""
     from scenes import board_scene_dict, render_sequence
@@ -328,4 +332,5 @@ def test_a_board_coming_back_in_part_does_not_take_over_from_the_flow():
     assert back, seen                   # the board does come back in part after a flow stretch
     for i in back:
         assert states[i] == "slam" and errors[i] < 0.002, (i, seen[i], states[i], errors[i])
-    assert states[-1] == "marker" and np.isfinite(errors).all() and errors.max() < 0.004
+    # the board carries the pose again once more of it is seen
+    assert "marker" in states[back[-1]:] and np.isfinite(errors).all() and errors.max() < 0.004

@@ -83,6 +83,10 @@ START_SPREAD = 0.015
 # tuning recordings measure 0.30-0.42 across x and y, the smeared starts of the fast pans 0.14-0.25.
 START_SHARP = 0.28
 FLOW_SEEDS = 300  # points followed by optical flow when the anchors and the map both fail
+# metres a frame the flow's camera position drifts from the anchors' pose it started from, to weigh the flow
+# against a board's measurement (`_flow_holds_better`): on the tuning pans' flow stretches the error grows
+# by 0.1-0.4 mm a frame; 0.2 and 0.3 mm gave the same tracking on them, 0.5 took bad boards back too often
+FLOW_DRIFT_M = 0.0003
 
 
 @dataclass
@@ -324,6 +328,8 @@ class Tracker:
         self._depth = 0.5
         self._full_frame = -(10**9)
         self._anchor_t: float | None = None   # when the anchors last gave the pose
+        self._anchor_spread_last: float | None = None   # the anchors' last pose's expected error (m; boards)
+        self._anchors_now: tuple | None = None          # (frame, the anchors' result there)
         self._via_flow = False                 # the last frame's pose came from flow
         self._flow_start: float | None = None  # when flow alone began to carry the pose
         self._followed: tuple[int, tuple | None] | None = None   # (frame, `_follow_from_last`'s result there)
@@ -447,6 +453,7 @@ class Tracker:
             # a board seen in part as it comes back (one marker at the image edge, sharp at a pan's turn) can
             # read centimetres off (its tilt and the camera's shift trade off): it does not take over from the flow
             if got is not None and (not usable or self._smeared(ar, got, gray, t) or self._partial_view(ar)
+                                    or self._flow_holds_better(ar, got)
                                     or (self._jumped(ar, t) and self._flow_disagrees(ar, got, t))):
                 return self._flow_result(got, t, t0, int(ar.markers) if ar is not None else 0)
         self._full_frame = self._frame
@@ -482,6 +489,8 @@ class Tracker:
                 got, flow_tried = self._follow_from_last(gray, t), True
                 if self._smeared(ar, got, gray, t) or (jumped and self._flow_disagrees(ar, got, t)):
                     return self._flow_result(got, t, t0, int(ar.markers))
+                if self._flow_holds_better(ar, got):
+                    return self._flow_result(got, t, t0, int(ar.markers), seam_from=self._anchor_output(ar))
 
         corners_w, corners_uv, markers = self._anchor_points(ar)
         if (len(corners_w) and (self._lost > 0 or self.motion.last is None)
@@ -530,6 +539,8 @@ class Tracker:
         got = self._follow_from_last(gray, t) if self._moving_fast(ar, t) or jumped else None
         if self._smeared(ar, got, gray, t) or (jumped and self._flow_disagrees(ar, got, t)):
             return self._flow_result(got, t, t0, int(ar.markers)), ar
+        if self._flow_holds_better(ar, got):
+            return self._flow_result(got, t, t0, int(ar.markers), seam_from=pose), ar
         # the flow's points, now measured in this image, are followed on from here (their plane seeds
         # placed from the anchors' pose, as new seeds would be); without flow it restarts next time
         self._flow = None if got is None else relift(self.camera, got[1], pose)
@@ -627,16 +638,22 @@ class Tracker:
         return _Fit(p2, "slam", int(inl.sum()), ids[pi[inl]], fi[inl], X[pi[inl]], ids[pi])
 
     def _finish(self, pose, pred, state, source, out_pose, markers, inliers, t, t0,
-                precise: bool = False) -> TrackResult:
+                precise: bool = False, seam_from=None) -> TrackResult:
         """Close a tracked frame: `pose` (world_from_camera) goes to the motion model, `out_pose` (else
-        `pose`) is shown, faded at a change of `source` (over `precise_blend_frames` when `precise`)."""
+        `pose`) is shown, faded at a change of `source` (over `precise_blend_frames` when `precise`; from
+        `seam_from` when given, see `_output`)."""
         self._since_anchor = 0 if state == "marker" else self._since_anchor + 1
         if state == "marker":
             self._anchor_t = t
+            # (the anchors measured this very frame when they give its pose)
+            ar = self._anchors_now[1] if self._anchors_now is not None and self._anchors_now[0] == self._frame else None
+            self._anchor_spread_last = None if ar is None else self._anchor_spread(ar)
+        elif self._anchor_t is None or t - self._anchor_t > self.smear_hold_s:
+            self._anchor_spread_last = None   # too long ago to compare with
         anchored = state == "marker" or (self._anchored and self._since_anchor < self.marker_every)
         if source is None:
             source = "fused" if anchored else "map"
-        out = self._output(pose if out_pose is None else out_pose, pred, source, precise)
+        out = self._output(pose if out_pose is None else out_pose, pred, source, precise, seam_from)
         self._anchored = anchored
         self.motion.update(pose, t)
         self._lost = 0
@@ -688,7 +705,7 @@ class Tracker:
             tracks = seed_on_plane(self.camera, self._prev_gray, self.motion.last, FLOW_SEEDS, keep=tracks,
                                    later=(self.motion.predict(t), t - self.motion.last_t))
         got = follow(self.camera, tracks, gray, self.motion.predict(t), self.min_inliers,
-                     dt=t - self.motion.last_t, lifted_from=self.motion.last)
+                     dt=t - self.motion.last_t, lifted_from=self.motion.last, before=self.motion.last_step())
         if got is None or not self._plausible(got[0], self.motion.last, t):
             return None
         return got
@@ -714,6 +731,33 @@ class Tracker:
         corners = np.asarray(ar.object_points, float).reshape(-1, 3)
         gap = float(np.median(np.linalg.norm(self.camera.project_world(corners, got[0]) - seen, axis=1)))
         return gap > self.smear_gate_px
+
+    def _anchor_spread(self, ar) -> float | None:
+        """The expected error (metres) of the camera position the anchors measured this frame: the
+        position's spread (`position_spread`) with the fit's own RMS residual, scaled to its degrees of
+        freedom (at least 0.05 px), as the pixel noise. Only for boards: a lone marker's or QR code's four
+        corners fit to hundredths of a pixel whatever their error, so their residual says nothing. None
+        when not a board."""
+        board = self._board_fit(ar)
+        if board is None or len(board[1]) < 4 or not np.isfinite(ar.reprojection_error):
+            return None
+        pose, seen = board
+        n = len(seen)
+        sigma = max(ar.reprojection_error * np.sqrt(2 * n / max(2 * n - 6, 1)), 0.05)
+        return position_spread(self.K, pose, seen, sigma)
+
+    def _flow_holds_better(self, ar, got) -> bool:
+        """Whether the flow's pose `got` is expected closer to the truth than the anchors' this frame: the
+        anchors' expected error (`_anchor_spread`) exceeds the flow's, which is that of the anchors' pose it
+        started from plus `FLOW_DRIFT_M` for each frame since. A board going out of view (a pan speeding
+        up: a few markers, smeared, at the image edge) reads millimetres to centimetres off while the
+        flow, one frame after a sharp board, is within a millimetre; the flow's points would otherwise be
+        placed on the plane again from the worse pose and carry its error through the whole pan. Only
+        while the anchors' last pose is recent (`smear_hold_s`) and was a board's."""
+        if got is None or ar is None or self._anchor_spread_last is None:
+            return False
+        spread = self._anchor_spread(ar)
+        return spread is not None and spread > self._anchor_spread_last + FLOW_DRIFT_M * (self._since_anchor + 1)
 
     def _too_smeared_to_start(self, ar, gray) -> bool:
         """Whether the anchors' edges are too soft across x or y (`start_sharpness`) to start the pose from
@@ -769,6 +813,7 @@ class Tracker:
         """Remember the corners the anchors measured (for `_fast_predicted` on the next frame)."""
         if ar is not None and ar.raw_world_from_camera is not None and len(ar.object_points) >= 4:
             self._anchor_corners = np.asarray(ar.object_points, float).reshape(-1, 3)
+            self._anchors_now = (self._frame, ar)
 
     def _corner_motion(self, corners: np.ndarray, *poses: np.ndarray) -> float:
         """How far (pixels, the most of any) world points `corners` (N,3) move in the image from the last
@@ -813,9 +858,13 @@ class Tracker:
         measured = ar.raw_world_from_camera if ar.raw_world_from_camera is not None else self._anchor_output(ar)
         return self._corner_motion(corners, self.motion.predict(t), np.asarray(measured, float)) >= self.smear_px
 
-    def _flow_result(self, got, t, t0, markers: int) -> TrackResult:
+    def _flow_result(self, got, t, t0, markers: int, seam_from: np.ndarray | None = None) -> TrackResult:
+        """A frame carried by the flow's pose `got`. `seam_from`: the anchors' pose this frame when they lost
+        to the flow only for holding the position worse (`_flow_holds_better`); a seam then fades from there,
+        not from the motion model's guess (a pan speeding up outruns that by millimetres)."""
         start = self._flow_start if self._via_flow else t
-        res = self._finish(got[0], self.motion.predict(t), "slam", None, None, markers, len(got[1]), t, t0)
+        res = self._finish(got[0], self.motion.predict(t), "slam", None, None, markers, len(got[1]), t, t0,
+                           seam_from=seam_from)
         self._flow = got[1]
         self._via_flow, self._flow_start = True, start
         return res
@@ -966,9 +1015,12 @@ class Tracker:
         self._kf_inliers = max(inliers, 1)
         self._anchor_kfs += state == "marker"
 
-    def _output(self, pose, pred, source: str, precise: bool = False) -> np.ndarray:
+    def _output(self, pose, pred, source: str, precise: bool = False,
+                seam_from: np.ndarray | None = None) -> np.ndarray:
         """Seamless output: fade the step when the source (anchors / fused / map) changes; a switch to
-        precise anchors, or precise anchors arriving during a fade, fades over `precise_blend_frames`."""
+        precise anchors, or precise anchors arriving during a fade, fades over `precise_blend_frames`.
+        The step is from where the output would have gone: the last output moved by the predicted motion,
+        or, given `seam_from`, the old source's own pose this frame (with the fade's offset so far)."""
         changed = source != self._source
         self._source = source
         # after lost frames nothing was shown: the new pose is taken as it is, not faded from a stale one;
@@ -977,7 +1029,10 @@ class Tracker:
         if (self._last_out is not None and pred is not None and self._lost == 0 and changed
                 and self.motion.steps >= 2):
             # where the output would have gone: the last output moved by the predicted camera motion
-            target = self._last_out @ np.linalg.inv(self.motion.last) @ pred
+            if seam_from is None:
+                target = self._last_out @ np.linalg.inv(self.motion.last) @ pred
+            else:
+                target = np.asarray(seam_from, float) @ self.blender.current_offset()
             if self._view_motion(pred) >= self.smear_px:
                 # a fast pan hides a step of a few pixels; fading it would keep the old error for frames
                 self.blender.switch(pose, target, self.fast_blend_frames, at_once=True)
@@ -992,6 +1047,7 @@ class Tracker:
 
     def _lost_frame(self, t0: float, markers: int) -> TrackResult:
         self._lost += 1
+        self._anchor_spread_last = None
         self._flow = None
         self._prev_gray = None
         self._via_flow = False

@@ -273,9 +273,54 @@ def _relift_first_followed(camera: Camera, tracks: Tracks, lifted_from: np.ndarr
     return X
 
 
+def _step_velocity(camera: Camera, tracks: Tracks, lifted_from: np.ndarray,
+                   before: tuple[np.ndarray, float] | None, after: np.ndarray) -> np.ndarray | None:
+    """Path velocities (N,2) pixels/s of `tracks` over the frame interval that ended in `tracks.image`, as
+    a followed point's displacement over it gives them: the velocity halfway along that path at the
+    point's row offset d (t - dt_before/2 + d). Their own (`path_velocity`) where they were followed
+    into that image; for the others (seeds placed in it) from the motion of their world points between
+    the poses `before` = (world_from_camera, dt_before seconds before `lifted_from`) and `lifted_from`,
+    which is the velocity at t - dt_before/2, carried the d on toward `after` (N,2), their path velocity
+    over the next interval (halfway along it, d + dt/2 after t): the two are a straight line in time.
+    None when neither is known."""
+    own = tracks.path_velocity
+    if before is None or not before[1] > 0:
+        return own
+    need = np.ones(len(tracks), bool) if own is None else ~np.isfinite(own).all(axis=1)
+    if not need.any():
+        return own
+    out = np.full((len(tracks), 2), np.nan) if own is None else own.copy()
+    X = tracks.X[need]
+    dtb = before[1]
+    v = (camera.project_world(X, lifted_from) - camera.project_world(X, before[0])) / dtb
+    d = camera.row_offsets(tracks.xy[need, 1])[:, None]
+    # v' = v + (after - v') d / dtb  (v' and `after` are dtb apart on the path-velocity line)
+    out[need] = (v * dtb + after[need] * d) / (dtb + d)
+    return out
+
+
+def _seed_velocity_then(camera: Camera, xy: np.ndarray, after: np.ndarray, dt: float,
+                        before_velocity: np.ndarray | None, dt_before: float) -> np.ndarray:
+    """Image velocities (N,2) pixels/s of points at distorted pixels xy (N,2) in the image they were seeded
+    in, at its rows' read times: their path velocity over the next interval (`after`, dt seconds)
+    interpolated with the one over the interval before (`before_velocity`, dt_before seconds; NaN rows
+    unknown). The two are the velocities halfway along each path (dt_before / 2 before the image, dt / 2
+    after it, both at the point's row offset d); the deskew stretch's middle, d / 2 after the image time,
+    is (dt_before - d) / 2 after the first. The path after alone (a camera starting to pan) is the
+    velocity half a frame late."""
+    if before_velocity is None or not dt_before > 0:
+        return after
+    out = after.copy()
+    known = np.isfinite(before_velocity).all(axis=1)
+    d = camera.row_offsets(np.asarray(xy, float)[known, 1])
+    w = ((dt_before - d) / (dt_before + dt))[:, None]
+    out[known] = before_velocity[known] + (after[known] - before_velocity[known]) * w
+    return out
+
+
 def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarray, min_inliers: int = 20,
-           min_inlier_ratio: float = 0.6, dt: float = 0.0,
-           lifted_from: np.ndarray | None = None) -> tuple[np.ndarray, Tracks] | None:
+           min_inlier_ratio: float = 0.6, dt: float = 0.0, lifted_from: np.ndarray | None = None,
+           before: tuple[np.ndarray, float] | None = None) -> tuple[np.ndarray, Tracks] | None:
     """Follow `tracks` into the grey image `gray` and fit the pose there.
 
     The flow starts each point where `predicted` (world_from_camera, e.g. constant velocity) projects
@@ -285,7 +330,10 @@ def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarr
     `tracks.image`; with it and a rolling shutter each point is fitted where it would be at the centre
     row's time, by its motion over those dt seconds. `lifted_from`: the pose (world_from_camera) of
     `tracks.image`; with it, plane seeds followed for the first time are placed on the plane again with
-    the motion now measured (they were placed with a guess of it).
+    the motion now measured (they were placed with a guess of it). `before`: (the pose of the frame
+    before `tracks.image`, the seconds between the two); with it the seeds' velocity over that interval
+    is known too, and a camera that speeds up (a pan starting) is deskewed by its velocity at each frame's
+    row times, not by the mean over the last interval (half a frame late: a shear of a pixel or more).
     """
     if len(tracks) < min_inliers:
         return None
@@ -302,11 +350,17 @@ def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarr
     if ok.sum() < min_inliers:
         return None
     idx = np.nonzero(ok)[0]
-    velocity = (_row_time_velocity(camera, tracks.xy, nxt, ok, dt, tracks.path_velocity)
-                if dt > 0 and camera.readout > 0 else None)
+    velocity = before_velocity = None
+    if dt > 0 and camera.readout > 0:
+        path = (nxt - tracks.xy) / dt
+        # the points' velocity over the interval before: what carries their motion on through an acceleration
+        before_velocity = (tracks.path_velocity if lifted_from is None
+                           else _step_velocity(camera, tracks, lifted_from, before, path))
+        velocity = _row_time_velocity(camera, tracks.xy, nxt, ok, dt, before_velocity)
     X_all = tracks.X
     if velocity is not None and lifted_from is not None:
-        X_all = _relift_first_followed(camera, tracks, lifted_from, (nxt - tracks.xy) / dt, ok)
+        seed_v = _seed_velocity_then(camera, tracks.xy, path, dt, before_velocity, 0.0 if before is None else before[1])
+        X_all = _relift_first_followed(camera, tracks, lifted_from, seed_v, ok)
     X = X_all[idx]
     seen = deskew(camera, nxt[idx], None if velocity is None else velocity[idx])
     und = camera.undistort_points(seen) if camera.has_distortion else seen

@@ -212,9 +212,12 @@ class MotionModel:
     last_t: float | None = None
     velocity: np.ndarray | None = None   # (6,) rotvec rad/s (camera frame), translation m/s (world)
     steps: int = 0   # frame-to-frame differences the velocity rests on (1: a single one, start-up noise and all)
+    before: np.ndarray | None = None     # the pose before `last` when the two were consecutive updates
+    before_t: float | None = None
 
     def reset(self) -> None:
         self.last, self.last_t, self.velocity, self.steps = None, None, None, 0
+        self.before, self.before_t = None, None
 
     def predict(self, t: float) -> np.ndarray | None:
         if self.last is None:
@@ -235,13 +238,22 @@ class MotionModel:
             v = np.concatenate([Rotation.from_matrix(rel).as_rotvec() / dt, (pose[:3, 3] - self.last[:3, 3]) / dt])
             self.velocity = v if self.velocity is None else smoothing * v + (1 - smoothing) * self.velocity
             self.steps += 1
+            self.before, self.before_t = self.last, self.last_t
         else:
             self.velocity, self.steps = None, 0
+            self.before, self.before_t = None, None
         self.last, self.last_t = pose.copy(), t
+
+    def last_step(self) -> tuple[np.ndarray, float] | None:
+        """(the pose before `last`, the seconds from it to `last`), when the velocity rests on that step; else None."""
+        if self.before is None or self.velocity is None or self.last_t is None or self.before_t is None:
+            return None
+        return self.before, self.last_t - self.before_t
 
     def lose(self) -> None:
         """Forget the velocity after a failed frame, keep the last pose for gating."""
         self.velocity, self.steps = None, 0
+        self.before, self.before_t = None, None
 
 
 def plausible(pose: np.ndarray, reference: np.ndarray, dt: float, max_speed: float = 2.0,
