@@ -77,7 +77,7 @@ def evaluate(folder: Path, limit: int | None = None, qr_call: str = "QRCodeDetec
     corners = np.concatenate([m.to_world(m.outline()) for m in build_models(s.anchors)])
     out = {w: {"err": [], "px": []} for w in WAYS}
     ms = {"arapp": [], "plain": []}
-    dist = []
+    dist, markers, board = [], [], []
     for k, img in _frames(s, limit):
         t = times.get(k, k / s.fps) if times else k / s.fps
         j = int(np.argmin(np.abs(gt_t - t)))
@@ -86,6 +86,8 @@ def evaluate(folder: Path, limit: int | None = None, qr_call: str = "QRCodeDetec
         gt = gt_T[j]
         dist.append(np.linalg.norm(gt[:3, 3]))
         res = tracker.process(img, t)
+        markers.append(res.markers)
+        board.append(max((len(tracker.models[i].markers) for i in res.anchors_seen), default=0))
         t0 = time.perf_counter()
         p = plain.pose(img)
         ms["plain"].append((time.perf_counter() - t0) * 1000)
@@ -101,6 +103,16 @@ def evaluate(folder: Path, limit: int | None = None, qr_call: str = "QRCodeDetec
                 out[name]["px"].append(s.camera.project_world(corners, T))
     m = {"frames": len(dist), "dist": float(np.median(dist)), "size": f"{s.camera.width}x{s.camera.height}",
          "ms": {k: float(np.median(v)) for k, v in ms.items()}}
+    # edge frames: a board seen in part (3 markers or fewer) or arapp's first frame on the anchors after a
+    # frame without them (the board first seen, or back after a pan): a few smeared markers at the image edge
+    seen = np.isfinite(np.array(out["arapp"]["err"])[:, 0])
+    entry = seen & (~np.r_[False, seen[:-1]] | (np.array(markers) <= 3) & (np.array(board) > 3))
+    m["entry"] = {"frames": int(entry.sum())}
+    for name in ("arapp", "plain"):
+        n = np.linalg.norm(np.array(out[name]["err"]), axis=1)
+        for key, sel in (("entry_max_m", entry), ("other_max_m", seen & ~entry)):
+            v = n[sel & np.isfinite(n)]
+            m["entry"][f"{name}_{key}"] = float(v.max()) if len(v) else float("nan")
     for name in WAYS:
         e = np.array(out[name]["err"])
         ok = np.isfinite(e[:, 0])
@@ -192,16 +204,31 @@ def run(quick: bool = False) -> str:
                      f"{static['plain']['corner_motion_px']:.4f} px with the plain way, "
                      f"{static['plain_f']['corner_motion_px']:.4f} px plain+filter (goal < 0.05 px).")
         lines.append("")
-    lines += ["Goals (issue 13), on every **test** recording, arapp's output: tracked frames >= plain; median error "
+    lines += ["Issue 13's goals, applied here to the AnchorTracker alone (`arapp replay --no-slam`: the anchors' own "
+              "pose, no map, no optical flow), on every **test** recording: tracked frames >= plain; median error "
               "<= plain and < 0.4 % of the camera distance; jitter <= half the filtered plain peer's (ratio <= 0.5); "
               "max error <= 20 mm while an anchor is in use. Speed: median ms <= plain's at 1280x720; at 640x480 "
-              "<= 15 ms per frame (half a 30 fps frame interval, leaving the rest for drawing).", "",
+              "<= 15 ms per frame (half a 30 fps frame interval, leaving the rest for drawing). arapp's output "
+              "(`arapp replay`, the GUI) is the Tracker of the next section, which carries such frames with its "
+              "map and optical flow; the issue's goals for it are that section's table.", "",
               "| test recording | " + " | ".join(GOALS) + " |", "|---|---|---|---|---|---|"]
     for name, m in results["Test"].items():
         if m is None:
             lines.append(f"| {name} | (missing) | | | | |")
             continue
         lines.append(f"| {name} | " + " | ".join("met" if v else "**not met**" for v in goals_met(m).values()) + " |")
+    missed = [(n, m) for n, m in results["Test"].items() if m is not None and not goals_met(m)["max <= 20 mm"]]
+    if missed:
+        lines += ["", "Where the largest errors are: *edge* frames are those where arapp sees a board in part (3 markers "
+                  "or fewer) or its first frame on the anchors after a frame without them (the board first seen, or "
+                  "back after a pan): a few smeared markers at the image edge are all there is to go on. Max error mm "
+                  "on those and on all other tracked frames, arapp / plain (plain on the same frames):", "",
+                  "| test recording | edge frames | max err mm on edge frames arapp / plain "
+                  "| max err mm on the other frames arapp / plain |", "|---|---|---|---|"]
+        for name, m in missed:
+            e = m["entry"]
+            lines.append(f"| {name} | {e['frames']} | {_mm(e['arapp_entry_max_m'], 1)} / {_mm(e['plain_entry_max_m'], 1)} "
+                         f"| {_mm(e['arapp_other_max_m'], 1)} / {_mm(e['plain_other_max_m'], 1)} |")
     lines += ["", "| size | recordings | median ms arapp (worst) | median ms plain (worst) | worst ratio | goal | met |",
               "|---|---|---|---|---|---|---|"]
     every = [m for part in results.values() for m in part.values() if m is not None]
