@@ -638,7 +638,7 @@ class Tracker:
         return _Fit(p2, "slam", int(inl.sum()), ids[pi[inl]], fi[inl], X[pi[inl]], ids[pi])
 
     def _finish(self, pose, pred, state, source, out_pose, markers, inliers, t, t0,
-                precise: bool = False, seam_from=None) -> TrackResult:
+                precise: bool = False, seam_from: np.ndarray | None = None) -> TrackResult:
         """Close a tracked frame: `pose` (world_from_camera) goes to the motion model, `out_pose` (else
         `pose`) is shown, faded at a change of `source` (over `precise_blend_frames` when `precise`; from
         `seam_from` when given, see `_output`)."""
