@@ -334,3 +334,26 @@ def test_a_board_coming_back_in_part_does_not_take_over_from_the_flow():
         assert states[i] == "slam" and errors[i] < 0.002, (i, seen[i], states[i], errors[i])
     # the board carries the pose again once more of it is seen
     assert "marker" in states[back[-1]:] and np.isfinite(errors).all() and errors.max() < 0.004
+
+
+def test_a_hand_over_to_the_better_flow_fades_from_the_anchors_pose():
+    """When the flow takes a frame from a board it holds better (`_flow_holds_better`), the seam fades from
+    the anchors' own pose this frame, not from where the motion model would have put the output (a pan
+    speeding up outruns that), and as onto precise anchors: over `precise_blend_frames`, this frame taking
+    the first step. Rule written here: on a slowly turning camera, the output is the flow's pose moved
+    (1 - 1/precise_blend_frames) of the way toward the anchors' (offsets along the camera's x axis)."""
+    from tracking.session import parse_anchors
+
+    anchors = parse_anchors([{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0, "length": 0.05}])
+    with Tracker(PLAIN, anchors, threaded=False) as tr:
+        start = look([0.0, -0.3, 0.4])
+        for k in range(3):
+            turned = cv2.Rodrigues(np.array([0.0, 0.05 * k / 30, 0.0]))[0]
+            tr.motion.update(start @ make_pose(turned, np.zeros(3)), k / 30)
+        pred = tr.motion.predict(3 / 30)
+        tr._last_out, tr._source, tr._lost, tr._frame = tr.motion.last.copy(), "anchors", 0, 7
+        flow = pred @ make_pose(np.eye(3), [0.003, 0.0, 0.0])
+        board = pred @ make_pose(np.eye(3), [-0.002, 0.0, 0.0])
+        out = tr._output(flow, pred, "fused", precise=True, seam_from=board)
+        a = 1.0 - 1.0 / tr.precise_blend_frames
+    assert np.allclose(out[:3, 3], flow[:3, 3] + a * (board[:3, 3] - flow[:3, 3]), atol=1e-9), out[:3, 3]

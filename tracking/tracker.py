@@ -861,10 +861,11 @@ class Tracker:
     def _flow_result(self, got, t, t0, markers: int, seam_from: np.ndarray | None = None) -> TrackResult:
         """A frame carried by the flow's pose `got`. `seam_from`: the anchors' pose this frame when they lost
         to the flow only for holding the position worse (`_flow_holds_better`); a seam then fades from there,
-        not from the motion model's guess (a pan speeding up outruns that by millimetres)."""
+        not from the motion model's guess (a pan speeding up outruns that by millimetres), and as onto
+        precise anchors (`precise_blend_frames`, from this frame on): the flow is the better pose."""
         start = self._flow_start if self._via_flow else t
         res = self._finish(got[0], self.motion.predict(t), "slam", None, None, markers, len(got[1]), t, t0,
-                           seam_from=seam_from)
+                           precise=seam_from is not None, seam_from=seam_from)
         self._flow = got[1]
         self._via_flow, self._flow_start = True, start
         return res
