@@ -59,7 +59,7 @@ def test_seeds_placed_on_the_plane_at_their_row_time():
     cam, world, seen1, seen2, t1 = _frames()
     tracks = _seeds(cam, world, seen1, t1)
     after = (seen2 - seen1) / DT
-    before_v = _step_velocity(cam, tracks, _pose_at(t1), (_pose_at(t1 - DT), DT), (seen2 - seen1) / DT)
+    before_v = _step_velocity(cam, tracks, _pose_at(t1), (_pose_at(t1 - DT), DT), (seen2 - seen1) / DT, DT)
     assert before_v is not None and np.isfinite(before_v).all()
     old, _ = lift_to_plane(cam, _pose_at(t1), deskew(cam, seen1, after))
     new, _ = lift_to_plane(cam, _pose_at(t1), deskew(cam, seen1, _seed_velocity_then(cam, seen1, after, DT, before_v, DT)))
@@ -76,7 +76,7 @@ def test_followed_seeds_deskewed_with_the_step_before():
     tracks = _seeds(cam, world, seen1, t1)
     ok = np.ones(len(world), bool)
     truth = cam.project_world(world, _pose_at(t1 + DT))
-    before_v = _step_velocity(cam, tracks, _pose_at(t1), (_pose_at(t1 - DT), DT), (seen2 - seen1) / DT)
+    before_v = _step_velocity(cam, tracks, _pose_at(t1), (_pose_at(t1 - DT), DT), (seen2 - seen1) / DT, DT)
     without = deskew(cam, seen2, _row_time_velocity(cam, seen1, seen2, ok, DT, None))
     with_step = deskew(cam, seen2, _row_time_velocity(cam, seen1, seen2, ok, DT, before_v))
     left_without = np.abs(without - truth).max()
@@ -93,6 +93,6 @@ def test_step_velocity_keeps_measured_paths():
     measured[::2] = 123.0
     tracks.path_velocity = measured
     after = (seen2 - seen1) / DT
-    v = _step_velocity(cam, tracks, _pose_at(t1), (_pose_at(t1 - DT), DT), after)
+    v = _step_velocity(cam, tracks, _pose_at(t1), (_pose_at(t1 - DT), DT), after, DT)
     assert np.all(v[::2] == 123.0) and np.isfinite(v).all()
-    assert _step_velocity(cam, tracks, _pose_at(t1), None, after) is measured
+    assert _step_velocity(cam, tracks, _pose_at(t1), None, after, DT) is measured

@@ -274,15 +274,15 @@ def _relift_first_followed(camera: Camera, tracks: Tracks, lifted_from: np.ndarr
 
 
 def _step_velocity(camera: Camera, tracks: Tracks, lifted_from: np.ndarray,
-                   before: tuple[np.ndarray, float] | None, after: np.ndarray) -> np.ndarray | None:
+                   before: tuple[np.ndarray, float] | None, after: np.ndarray, dt: float) -> np.ndarray | None:
     """Path velocities (N,2) pixels/s of `tracks` over the frame interval that ended in `tracks.image`, as
     a followed point's displacement over it gives them: the velocity halfway along that path at the
     point's row offset d (t - dt_before/2 + d). Their own (`path_velocity`) where they were followed
     into that image; for the others (seeds placed in it) from the motion of their world points between
     the poses `before` = (world_from_camera, dt_before seconds before `lifted_from`) and `lifted_from`,
     which is the velocity at t - dt_before/2, carried the d on toward `after` (N,2), their path velocity
-    over the next interval (halfway along it, d + dt/2 after t): the two are a straight line in time.
-    None when neither is known."""
+    over the next interval of dt seconds (halfway along it, d + dt/2 after t): the two are a straight
+    line in time. None when neither is known."""
     own = tracks.path_velocity
     if before is None or not before[1] > 0:
         return own
@@ -294,8 +294,8 @@ def _step_velocity(camera: Camera, tracks: Tracks, lifted_from: np.ndarray,
     dtb = before[1]
     v = (camera.project_world(X, lifted_from) - camera.project_world(X, before[0])) / dtb
     d = camera.row_offsets(tracks.xy[need, 1])[:, None]
-    # v' = v + (after - v') d / dtb  (v' and `after` are dtb apart on the path-velocity line)
-    out[need] = (v * dtb + after[need] * d) / (dtb + d)
+    # on the line through (t - dtb/2, v) and (t + dt/2 + d, after), at t - dtb/2 + d
+    out[need] = v + (after[need] - v) * d / ((dtb + dt) / 2 + d)
     return out
 
 
@@ -355,7 +355,7 @@ def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarr
         path = (nxt - tracks.xy) / dt
         # the points' velocity over the interval before: what carries their motion on through an acceleration
         before_velocity = (tracks.path_velocity if lifted_from is None
-                           else _step_velocity(camera, tracks, lifted_from, before, path))
+                           else _step_velocity(camera, tracks, lifted_from, before, path, dt))
         velocity = _row_time_velocity(camera, tracks.xy, nxt, ok, dt, before_velocity)
     X_all = tracks.X
     if velocity is not None and lifted_from is not None:
