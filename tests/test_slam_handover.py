@@ -65,8 +65,8 @@ def test_the_flow_carries_a_frame_when_the_board_reads_worse(markers, sigma, flo
         said, errors = [], []
         for k, draw in enumerate(_draws(now_world, pose, sigma, rng)):
             tr._anchor_spread_last = tr._anchor_spread(result(whole, last[k]))
-            tr._since_anchor = 0
-            said.append(tr._flow_holds_better(result(now_world, draw), got=object()))
+            tr._since_anchor, tr._anchor_t = 0, 0.0
+            said.append(tr._flow_holds_better(result(now_world, draw), got=object(), t=1 / 30))
             errors.append(np.sum((draw[0][:3, 3] - pose[:3, 3]) ** 2))
     now_error = np.sqrt(np.mean(errors))
     assert (now_error > last_error + FLOW_DRIFT_M) == flow, (now_error, last_error)
@@ -77,7 +77,9 @@ def test_no_hand_over_without_a_flow_or_a_board():
     with Tracker(Camera(K, np.zeros(5), 640, 480), parse_anchors(BOARD), threaded=False) as tr:
         ar = SimpleNamespace(raw_world_from_camera=np.eye(4), anchors_seen=[0], object_points=np.zeros((16, 3)),
                              reprojection_error=5.0)
-        tr._anchor_spread_last = 0.0
-        assert not tr._flow_holds_better(ar, got=None)
-        tr._anchor_spread_last = None          # the last pose was not a board's (or too long ago)
-        assert not tr._flow_holds_better(ar, got=object())
+        tr._anchor_spread_last, tr._anchor_t = 0.0, 0.0
+        assert tr._flow_holds_better(ar, got=object(), t=1 / 30)      # (the case itself: the flow holds better)
+        assert not tr._flow_holds_better(ar, got=None, t=1 / 30)
+        assert not tr._flow_holds_better(ar, got=object(), t=tr.smear_hold_s + 0.1)   # too long ago
+        tr._anchor_spread_last = None          # the last pose was not a board's
+        assert not tr._flow_holds_better(ar, got=object(), t=1 / 30)

@@ -453,7 +453,7 @@ class Tracker:
             # a board seen in part as it comes back (one marker at the image edge, sharp at a pan's turn) can
             # read centimetres off (its tilt and the camera's shift trade off): it does not take over from the flow
             if got is not None and (not usable or self._smeared(ar, got, gray, t) or self._partial_view(ar)
-                                    or self._flow_holds_better(ar, got)
+                                    or self._flow_holds_better(ar, got, t)
                                     or (self._jumped(ar, t) and self._flow_disagrees(ar, got, t))):
                 return self._flow_result(got, t, t0, int(ar.markers) if ar is not None else 0)
         self._full_frame = self._frame
@@ -489,7 +489,7 @@ class Tracker:
                 got, flow_tried = self._follow_from_last(gray, t), True
                 if self._smeared(ar, got, gray, t) or (jumped and self._flow_disagrees(ar, got, t)):
                     return self._flow_result(got, t, t0, int(ar.markers))
-                if self._flow_holds_better(ar, got):
+                if self._flow_holds_better(ar, got, t):
                     return self._flow_result(got, t, t0, int(ar.markers), seam_from=self._anchor_output(ar))
 
         corners_w, corners_uv, markers = self._anchor_points(ar)
@@ -539,7 +539,7 @@ class Tracker:
         got = self._follow_from_last(gray, t) if self._moving_fast(ar, t) or jumped else None
         if self._smeared(ar, got, gray, t) or (jumped and self._flow_disagrees(ar, got, t)):
             return self._flow_result(got, t, t0, int(ar.markers)), ar
-        if self._flow_holds_better(ar, got):
+        if self._flow_holds_better(ar, got, t):
             return self._flow_result(got, t, t0, int(ar.markers), seam_from=pose), ar
         # the flow's points, now measured in this image, are followed on from here (their plane seeds
         # placed from the anchors' pose, as new seeds would be); without flow it restarts next time
@@ -648,8 +648,6 @@ class Tracker:
             # (the anchors measured this very frame when they give its pose)
             ar = self._anchors_now[1] if self._anchors_now is not None and self._anchors_now[0] == self._frame else None
             self._anchor_spread_last = None if ar is None else self._anchor_spread(ar)
-        elif self._anchor_t is None or t - self._anchor_t > self.smear_hold_s:
-            self._anchor_spread_last = None   # too long ago to compare with
         anchored = state == "marker" or (self._anchored and self._since_anchor < self.marker_every)
         if source is None:
             source = "fused" if anchored else "map"
@@ -732,10 +730,10 @@ class Tracker:
         gap = float(np.median(np.linalg.norm(self.camera.project_world(corners, got[0]) - seen, axis=1)))
         return gap > self.smear_gate_px
 
-    def _anchor_spread(self, ar) -> float | None:
+    def _anchor_spread(self, ar, min_px: float = 0.05) -> float | None:
         """The expected error (metres) of the camera position the anchors measured this frame: the
         position's spread (`position_spread`) with the fit's own RMS residual, scaled to its degrees of
-        freedom (at least 0.05 px), as the pixel noise. Only for boards: a lone marker's or QR code's four
+        freedom (at least `min_px`), as the pixel noise. Only for boards: a lone marker's or QR code's four
         corners fit to hundredths of a pixel whatever their error, so their residual says nothing. None
         when not a board."""
         board = self._board_fit(ar)
@@ -743,10 +741,10 @@ class Tracker:
             return None
         pose, seen = board
         n = len(seen)
-        sigma = max(ar.reprojection_error * np.sqrt(2 * n / max(2 * n - 6, 1)), 0.05)
+        sigma = max(ar.reprojection_error * np.sqrt(2 * n / max(2 * n - 6, 1)), min_px)
         return position_spread(self.K, pose, seen, sigma)
 
-    def _flow_holds_better(self, ar, got) -> bool:
+    def _flow_holds_better(self, ar, got, t: float) -> bool:
         """Whether the flow's pose `got` is expected closer to the truth than the anchors' this frame: the
         anchors' expected error (`_anchor_spread`) exceeds the flow's, which is that of the anchors' pose it
         started from plus `FLOW_DRIFT_M` for each frame since. A board going out of view (a pan speeding
@@ -754,7 +752,8 @@ class Tracker:
         flow, one frame after a sharp board, is within a millimetre; the flow's points would otherwise be
         placed on the plane again from the worse pose and carry its error through the whole pan. Only
         while the anchors' last pose is recent (`smear_hold_s`) and was a board's."""
-        if got is None or ar is None or self._anchor_spread_last is None:
+        if (got is None or ar is None or self._anchor_spread_last is None or self._anchor_t is None
+                or t - self._anchor_t > self.smear_hold_s):
             return False
         spread = self._anchor_spread(ar)
         return spread is not None and spread > self._anchor_spread_last + FLOW_DRIFT_M * (self._since_anchor + 1)
@@ -918,14 +917,11 @@ class Tracker:
         residual, scaled to the residual's degrees of freedom, as the pixel noise. With `gray` (the frame),
         boards whose edges are sharp across x and y (`START_SHARP`) are never held back. Markers and QR codes
         (four corners fit to a few hundredths of a pixel whatever their error) are left to `start_sharpness`."""
-        board = self._board_fit(ar)
-        if board is None or len(board[1]) < 4 or not np.isfinite(ar.reprojection_error):
+        spread = self._anchor_spread(ar, min_px=0.0)
+        if spread is None:
             return False
-        pose, seen = board
-        n = len(seen)
-        sigma = ar.reprojection_error * np.sqrt(2 * n / max(2 * n - 6, 1))
-        distance = float(np.linalg.norm(pose[:3, 3] - seen.mean(axis=0)))
-        if not position_spread(self.K, pose, seen, sigma) > START_SPREAD * distance:
+        pose, seen = self._board_fit(ar)
+        if not spread > START_SPREAD * float(np.linalg.norm(pose[:3, 3] - seen.mean(axis=0))):
             return False
         if gray is None:
             return True
