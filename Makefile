@@ -40,7 +40,7 @@ test: $(STAMP) $(OCTO_STAMP)
 	$(VENV)/bin/lint-imports --no-cache && $(PY) -m pytest -q -p no:cacheprovider tests
 
 bench: $(STAMP)
-	$(PY) benchmarks/run_all.py --out BENCHMARKS.md
+	$(PY) benchmarks/run_all.py --out BENCHMARKS.md $(if $(ONLY),--only $(ONLY) --merge)
 
 clean:
 	rm -rf $(VENV) $(OCTO) out
