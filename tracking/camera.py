@@ -6,13 +6,13 @@ the camera frame (x right, y down, z forward), metres.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from tracking.calibration_file import read_calibration_file
 from tracking.errors import CalibrationError
 
 
@@ -200,72 +200,32 @@ class Camera:
             fs.release()
 
     @classmethod
-    def load_yaml(cls, path: str | Path) -> "Camera":
-        """Read an OpenCV calibration file (YAML/XML/JSON FileStorage), as written by OpenCV's own tools.
+    def load_yaml(cls, path: str | Path, image_size: tuple[int, int] | None = None) -> "Camera":
+        """Read a calibration file (tracking.calibration_file: OpenCV FileStorage YAML/XML/JSON with
+        camera_matrix / distortion_coefficients or K / D, or a ROS camera_info YAML). `image_size` (width,
+        height in pixels) is used when the file states none; without it such a file is refused. No
+        distortion coefficients = no distortion. Raises CalibrationError naming the file and the field."""
+        return cls.load_file(path, image_size)[0]
 
-        Needs camera_matrix (3x3 !!opencv-matrix), image_width and image_height (pixels); distortion_coefficients
-        is optional (none = no distortion). Raises CalibrationError naming the file and the field.
-        """
-        path = Path(path)
-        if not path.is_file():
-            raise CalibrationError(f"calibration file {path} does not exist")
+    @classmethod
+    def load_file(cls, path: str | Path, image_size: tuple[int, int] | None = None) -> tuple["Camera", list[str]]:
+        """As load_yaml, with the notes a user should read: how the file was read when it is not arapp's own
+        layout, and where the image size came from when the file has none."""
+        f = read_calibration_file(path)
+        notes = []
+        if not f.layout.startswith("OpenCV FileStorage (camera_matrix"):
+            notes.append(f"{f.path}: read as {f.layout}")
+        if f.width is None:
+            if image_size is None:
+                raise CalibrationError(f"{f.path}: image_width, image_height: missing (the image size in pixels "
+                                       "the calibration is for); add them, or use the file with a video or camera "
+                                       "that gives the size")
+            width, height = int(image_size[0]), int(image_size[1])
+            notes.append(f"{f.path} gives no image size; taken as the frames' {width}x{height}")
+        else:
+            width, height = f.width, f.height
+        dist = f.dist if f.dist.size else np.zeros(5)
         try:
-            fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-        except (cv2.error, SystemError) as e:
-            # OpenCV's parser reports a syntax error as cv2.error, or (through the Python binding of the
-            # constructor) as a SystemError whose cause is that cv2.error.
-            raise CalibrationError(f"{path}: not a valid OpenCV calibration file ({_cv_message(e)}); "
-                                   "write it with 'arapp calibrate' or cv2.FileStorage") from None
-        try:
-            if not fs.isOpened():
-                raise CalibrationError(f"{path}: cannot be read as OpenCV FileStorage YAML")
-            K = _read_matrix(fs, "camera_matrix", path)
-            dist = _read_matrix(fs, "distortion_coefficients", path, required=False)
-            size = {}
-            for key in ("image_width", "image_height"):
-                node = fs.getNode(key)
-                if node.empty():
-                    raise CalibrationError(f"{path}: {key}: missing (the image size in pixels the calibration is for)")
-                value = node.real() if node.isReal() or node.isInt() else float("nan")
-                if not (np.isfinite(value) and value == int(value) and 0 < value <= 100_000):
-                    raise CalibrationError(f"{path}: {key}: must be a positive whole number of pixels")
-                size[key] = int(value)
-            if K.shape != (3, 3):
-                raise CalibrationError(f"{path}: camera_matrix: must be 3x3, got {K.shape[0]}x{K.shape[1]}")
-            try:
-                return cls(K, np.zeros(5) if dist is None else dist.ravel(), size["image_width"], size["image_height"])
-            except CalibrationError as e:
-                raise CalibrationError(f"{path}: {e}") from None
-        finally:
-            fs.release()
-
-
-def _cv_message(exc: BaseException) -> str:
-    """The short text of an OpenCV error (the cv2.error behind a SystemError when there is one)."""
-    cause = exc.__cause__ or exc.__context__
-    err = cause if isinstance(cause, cv2.error) else exc
-    # Parsing errors read "FILE(LINE): what"; OpenCV versions put it in `err` or in `func`.
-    parts = [str(getattr(err, name, "") or "") for name in ("err", "func")]
-    located = [p for p in parts if re.search(r"\(\d+\): ", p)]
-    text = located[0] if located else max(parts, key=len) or str(err)
-    text = re.sub(r"^.*\((\d+)\): ", r"line \1: ", text.strip())
-    return " ".join(text.split())[:200]
-
-
-def _read_matrix(fs, key: str, path: Path, required: bool = True) -> np.ndarray | None:
-    """A finite matrix stored as an !!opencv-matrix under `key` (None when absent and not required)."""
-    node = fs.getNode(key)
-    if node.empty():
-        if required:
-            raise CalibrationError(f"{path}: {key}: missing")
-        return None
-    try:
-        mat = node.mat()
-    except cv2.error:  # a plain list or a scalar, not a matrix map
-        mat = None
-    if mat is None:
-        raise CalibrationError(f"{path}: {key}: must be an !!opencv-matrix (rows, cols, dt, data)")
-    mat = np.asarray(mat, dtype=float)
-    if not np.all(np.isfinite(mat)):
-        raise CalibrationError(f"{path}: {key}: holds a value that is not a finite number")
-    return mat
+            return cls(f.K, dist, width, height), notes
+        except CalibrationError as e:
+            raise CalibrationError(f"{f.path}: {e}") from None

@@ -49,6 +49,7 @@ class Source:
     def __init__(self):
         self.error: str | None = None  # set when the stream ended early because something failed
         self.info: dict = {"kind": self.kind}  # the session.json `source` block for recordings of this source
+        self.notes: list[str] = []  # what a user should read about how the source was opened (one line each)
         self._camera: Camera | None = None
         self.fps: float = 30.0
         self.closed = False

@@ -13,8 +13,10 @@ from .base import Frame, Source, _as_bgr, _fit_camera, _open_capture, _probe_fir
 
 
 class VideoFileSource(Source):
-    """A plain video file; timestamps frame / fps. With `calibration` (OpenCV YAML) it has a camera
-    (scaled to the video size if the calibration was made at another size of the same aspect)."""
+    """A plain video file (mp4, avi, mov, webm, mkv: whatever OpenCV's FFmpeg decodes); timestamps
+    frame / fps. With `calibration` (a file tracking.calibration_file reads, or a Camera) it has a camera
+    (scaled to the video size if the calibration was made at another size of the same aspect; a file
+    without an image size is taken at the video's, noted in `notes`)."""
 
     kind = "file"
 
@@ -30,7 +32,10 @@ class VideoFileSource(Source):
         n = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT))
         self.frame_count = n if n > 0 else None
         if calibration is not None:
-            cam = calibration if isinstance(calibration, Camera) else Camera.load_yaml(calibration)
+            if isinstance(calibration, Camera):
+                cam = calibration
+            else:  # a file without an image size is for this video's frames (the note says so)
+                cam, self.notes = Camera.load_file(calibration, (self.width, self.height))
             self._camera = _fit_camera(cam, self.width, self.height, str(calibration), str(self.path))
         self.info = {"kind": "file", "path": str(self.path)}
 
