@@ -18,11 +18,11 @@ from typing import Callable
 import cv2
 import numpy as np
 
+from arapp.input_source import open_input
 from arapp.pipeline import Pipeline, load_display_model
 from arapp.toolpath_overlay import toolpath_overlay
 from tracking.evaluation import evaluate
 from tracking.poses import read_tum, tum_line
-from tracking.sources import RecordingSource
 
 
 @dataclass
@@ -37,32 +37,38 @@ class ReplayOptions:
     toolpaths: str | None = None
     layer: int | None = None
     tracker_params: dict = field(default_factory=dict)
+    calibration: str | None = None  # calibration file for a plain video (default: the estimated camera)
+    anchors: str | None = None  # anchors JSON (default: a recording's own, else the recorder's default)
 
 
 def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | None = None,
-           progress: Callable[[int, int], None] | None = None, cancel=None) -> dict:
-    """Run the pipeline over every frame of `recording`; return the report dict (also written to report.json).
+           progress: Callable[[int, int], None] | None = None, cancel=None,
+           say: Callable[[str], None] | None = None) -> dict:
+    """Run the pipeline over every frame of `recording` (a recording folder or a plain video, opened by
+    arapp.input_source.open_input); return the report dict (also written to report.json).
 
     progress(done, total) is called after each frame; `cancel` is an optional
-    threading.Event that stops the replay early (outputs stay consistent).
+    threading.Event that stops the replay early (outputs stay consistent); say(line) is given each
+    note on how the input was opened (the estimated camera, the default anchor).
     """
     options = options or ReplayOptions()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     model = load_display_model(options.model) if options.model else None
 
-    source = RecordingSource(recording)
-    camera = source.camera
-    anchors = source.session.anchors
+    opened = open_input(recording, calibration=options.calibration, anchors=options.anchors)
+    source, camera, anchors = opened.source, opened.camera, opened.anchors
+    for line in opened.notes if say is not None else ():
+        say(line)
     pipeline = Pipeline(camera, anchors, model=model, placement=options.placement, mode=options.mode,
                         slam=options.slam, draw=options.video, tracker_params=options.tracker_params)
     if options.toolpaths:
         line_sets, world_from_bed = toolpath_overlay(options.toolpaths, options.printer, anchors, options.layer)
         pipeline.set_toolpaths(line_sets, world_from_bed)
 
-    total = source.frame_count
+    total = source.frame_count or 0  # 0: a video whose container gives no frame count
     if options.max_frames is not None:
-        total = min(total, options.max_frames)
+        total = min(total, options.max_frames) if total else options.max_frames
     writer = None
     video_path = out / "overlay.mp4"
     times, states = [], []

@@ -2,11 +2,17 @@
 
 import sys
 
-HELP = "replay a recording through tracking and rendering; write poses, CSV, overlay video, report"
+HELP = "replay a recording or a video through tracking and rendering; write poses, CSV, overlay video, report"
 
 
 def add_arguments(parser):
-    parser.add_argument("recording", help="recording folder (session.json + video)")
+    parser.add_argument("recording", help="recording folder (session.json + video) or a plain video (mp4, avi, mov, "
+                        "webm, mkv)")
+    parser.add_argument("--calibration", help="calibration file for a plain video (OpenCV FileStorage YAML/XML/JSON "
+                        "or ROS camera_info YAML); default: the estimated camera (said when used)")
+    parser.add_argument("--anchors", help="JSON file with the anchors to track (a list as in session.json); default: "
+                        "a recording's own, else one aruco DICT_ARUCO_MIP_36h12 id 0 of 0.06 m (what `arapp markers "
+                        "aruco` prints)")
     parser.add_argument("--out", required=True, help="output folder (created)")
     parser.add_argument("--no-video", action="store_true", help="skip overlay.mp4 (faster)")
     parser.add_argument("--model", help="model to draw on the anchor (NURBS JSON or STL/OBJ/PLY/3MF/GLB)")
@@ -47,10 +53,12 @@ def run(args):
     opts = ReplayOptions(model=args.model, placement=placement, mode=args.mode, video=not args.no_video,
                          slam=not args.no_slam, max_frames=args.frames, printer=args.printer,
                          toolpaths=args.toolpaths, layer=args.layer,
-                         tracker_params={"marker_every": args.marker_every} if not args.no_slam else {})
+                         tracker_params={"marker_every": args.marker_every} if not args.no_slam else {},
+                         calibration=args.calibration, anchors=args.anchors)
     # Written to a temporary folder moved into place at the end: a failure leaves no (empty) --out behind.
     with staged_folder(args.out) as tmp:
-        report = replay(args.recording, tmp, opts, progress=terminal_progress(sys.stderr))  # stderr as now
+        report = replay(args.recording, tmp, opts, progress=terminal_progress(sys.stderr),  # stderr as now
+                        say=lambda line: print(f"replay: {line}", flush=True))
     keys = ["frames", "tracked_fraction", "fps", "ate_rmse_m", "ate_max_m", "rpe_trans_m_per_s", "rpe_rot_deg_per_s"]
     summary = ", ".join(f"{k} {report[k]:.4g}" for k in keys if isinstance(report.get(k), (int, float)))
     print(f"replay: {summary}")
