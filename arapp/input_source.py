@@ -35,6 +35,7 @@ class Input:
     anchor_blocks: list | None
     notes: list[str] = field(default_factory=list)
     camera_kind: str = camera_store.OWN  # OWN, STORED or ESTIMATED
+    default_anchors: bool = False  # no --anchors and no recording: the recorder's default anchor
 
     @property
     def camera(self) -> Camera:
@@ -65,10 +66,12 @@ def describe_anchors(anchors: list[AnchorSpec]) -> str:
 
 
 def open_input(spec, calibration: str | None = None, anchors: str | None = None, realtime: bool = False,
-               width: int | None = None, height: int | None = None, fps: float | None = None) -> Input:
+               width: int | None = None, height: int | None = None, fps: float | None = None,
+               default_anchor_note: bool = True) -> Input:
     """Open `spec` (a recording folder, a video file, 'v4l2:0', ...; see tracking.sources.SPEC_HELP) with
     the camera and anchors of the module doc. `calibration`, `anchors`: file paths or None. The anchors
-    file is read before the source opens, so a bad one costs no camera start."""
+    file is read before the source opens, so a bad one costs no camera start. default_anchor_note=False
+    leaves the line on the default anchor to the caller (`Input.default_anchors` says it was used)."""
     blocks = parsed = None
     if anchors is not None:
         blocks = read_anchor_blocks(anchors)
@@ -92,10 +95,11 @@ def open_input(spec, calibration: str | None = None, anchors: str | None = None,
             parsed, blocks = session.anchors, None
         else:
             parsed, blocks = parse_anchors(DEFAULT_ANCHORS), DEFAULT_ANCHORS
-            notes.append(f"no --anchors: looking for the default anchor, {describe_anchors(parsed)} (what `arapp "
-                         "markers aruco` prints); give --anchors anchors.json (a list of anchors as in "
-                         "session.json) for another")
+            if default_anchor_note:
+                notes.append(f"no --anchors: looking for the default anchor, {describe_anchors(parsed)} (what "
+                             "`arapp markers aruco` prints); give --anchors anchors.json (a list of anchors as in "
+                             "session.json) for another")
     except BaseException:
         source.close()
         raise
-    return Input(source, parsed, blocks, notes, kind)
+    return Input(source, parsed, blocks, notes, kind, blocks is DEFAULT_ANCHORS)

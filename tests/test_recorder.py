@@ -124,11 +124,15 @@ def test_writer_checks_frames_and_anchors(tmp_path):
     assert load_session(tmp_path / "c").video == "video.avi"
 
 
-def test_cli_record_messages(rec, tmp_path, capsys):
+def test_cli_record_messages(rec, tmp_path, capsys, config_dir):
     video = str(rec / "video.mkv")
-    assert main(["record", "--source", video, "--out", str(tmp_path / "v")]) == 2
-    err = capsys.readouterr().err
-    assert "no calibration; pass --calibration" in err and not (tmp_path / "v").exists()
+    # issue 25: a video without a calibration file records with the estimated camera, said in one line
+    # (was refused: "no calibration; pass --calibration"), and the default anchor it wrote is named
+    assert main(["record", "--source", video, "--out", str(tmp_path / "v"), "--seconds", "0.2"]) == 0
+    out = capsys.readouterr().out
+    assert "the estimated camera" in out and "arapp calibrate --source" in out
+    assert "wrote the default anchor" in out and "id 0" in out
+    assert load_session(tmp_path / "v").source["calibration"].startswith("estimated")
     assert main(["record", "--source", "v4l2:/dev/video99", "--out", str(tmp_path / "w")]) == 2
     assert "no camera at /dev/video99" in capsys.readouterr().err
     bad = tmp_path / "anchors.json"

@@ -6,7 +6,9 @@ HELP = "record a camera or video into a recording folder (video, frames.csv, ses
 def add_arguments(parser):
     parser.add_argument("--source", required=True, help="v4l2:0, v4l2:/dev/video2, depthai[:<id>], or a video file")
     parser.add_argument("--out", required=True, help="recording folder to create, e.g. recordings/my_desk")
-    parser.add_argument("--calibration", help="OpenCV calibration YAML (needed for V4L2 cameras and video files)")
+    parser.add_argument("--calibration", help="calibration file for a V4L2 camera or a video file (OpenCV FileStorage "
+                        "or ROS camera_info YAML); default: one the GUI's wizard stored, else the estimated camera "
+                        "(said, and noted in session.json)")
     parser.add_argument("--anchors", help="JSON file with the anchors list (as in session.json); "
                         "default: the source recording's anchors, else one aruco DICT_ARUCO_MIP_36h12 id 0 of 0.06 m (what `arapp markers aruco` prints)")
     parser.add_argument("--seconds", type=float, help="stop after this many seconds (default: until Ctrl-C or the end)")
@@ -25,10 +27,9 @@ def run(args):
     from pathlib import Path
 
     from tracking.recorder import record
-    from tracking.session import read_anchor_blocks
-    from tracking.sources import open_source
 
     from arapp.exchange.staging import staged_folder
+    from arapp.input_source import describe_anchors, open_input
 
     for flag, value in (("--seconds", args.seconds), ("--fps", args.fps)):
         if value is not None and not 0 < value <= 86400:
@@ -36,18 +37,23 @@ def run(args):
     for flag, value in (("--width", args.width), ("--height", args.height)):
         if value is not None and not 0 < value <= 16384:
             raise ValueError(f"{flag} must be 1 to 16384 pixels, got {value}")
-    anchors = read_anchor_blocks(args.anchors) if args.anchors else None
     out = Path(args.out)
     if out.exists() and any(out.iterdir()) and not args.force:
         raise FileExistsError(f"{out}: already holds files (a recording?); use --force to overwrite it")
-    with open_source(args.source, calibration=args.calibration, width=args.width, height=args.height,
-                     fps=args.fps) as src:
-        src.camera  # noqa: B018 - fail before creating files if the source has no calibration
+    # the camera and anchors are settled (and a bad file refused) before any file is created
+    with open_input(args.source, calibration=args.calibration, anchors=args.anchors, width=args.width,
+                    height=args.height, fps=args.fps, default_anchor_note=False) as opened:
+        for line in opened.notes:
+            print(f"record: {line}", flush=True)
         # Recorded into a temporary folder that replaces --out at the end: a failure leaves nothing behind.
         with staged_folder(out, replace=True) as tmp:
-            session = record(src, tmp, anchors=anchors, seconds=args.seconds, force=True, fourcc=args.codec,
-                             depth=not args.no_depth)
+            session = record(opened.source, tmp, anchors=opened.anchor_blocks, seconds=args.seconds, force=True,
+                             fourcc=args.codec, depth=not args.no_depth)
     n_depth = len(list((out / "depth").glob("*.png"))) if (out / "depth").is_dir() else 0
     depth = f", depth for {n_depth} frames (depth/, 16-bit PNG, mm)" if n_depth else ""
     print(f"{out}: {session.video}, {session.camera.width}x{session.camera.height} @ {session.fps:.1f} fps{depth}")
+    if opened.default_anchors:
+        print(f"record: no --anchors: wrote the default anchor into {out / 'session.json'}: "
+              f"{describe_anchors(session.anchors)} (what `arapp markers aruco` prints); if the video shows "
+              "another, edit its anchors there or record again with --anchors anchors.json")
     return 0
