@@ -59,3 +59,11 @@ def recall(key: str, default=None):
 def secret_path(name: str) -> Path:
     """Where the secret `name` (e.g. an OctoPrint URL's API key) is stored: secrets/<slug>.key."""
     return config_dir() / "secrets" / f"{slug(name)}.key"
+
+
+def jobs_dir(default: Path) -> Path:
+    """Where print jobs (sliced G-code and their saved states) are kept: `default` (the GUI's app data
+    folder), or print-jobs/ in $ARAPP_CONFIG_DIR when that is set, so tests and portable installs keep
+    their stopped prints to themselves."""
+    env = os.environ.get("ARAPP_CONFIG_DIR")
+    return (Path(env).expanduser() / "print-jobs") if env else Path(default)

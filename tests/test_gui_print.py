@@ -223,6 +223,7 @@ def test_printer_halt_shows_the_printers_message_and_the_job_file(qtbot, window,
 
     dlg = sliced_dialog(qtbot, window, tmp_path, bed_profile, size_mm=10.0)
     dlg.result = dataclasses.replace(dlg.result, gcode=quick(dlg.result.gcode))
+    Path(dlg.job_gcode_path).write_text(dlg.result.gcode)  # the job's G-code file is what is printed
     finished = []
     dlg.print_finished.connect(finished.append)
     with VirtualPrinterPty(simulated_errors=[], inject={60: "trigger_fatal_error_marlin"}) as vp:
@@ -230,10 +231,13 @@ def test_printer_halt_shows_the_printers_message_and_the_job_file(qtbot, window,
         dlg.start_print()
         qtbot.waitUntil(lambda: bool(finished), timeout=TIMEOUT_MS)
     title, message = window.errors[-1]
-    assert title == "The printer halted"
+    assert title == "The printer halted itself"
     assert "Thermal Runaway, system stopped! Heater_ID: bed" in message  # the printer's own words
     job = Path(dlg.job_gcode_path).with_suffix(".printjob.json")
-    assert str(job) in message and "--resume" in message
+    # plain words and the GUI's own way on (Resume), not the CLI's command line
+    assert "--resume" not in message and "press Resume" in message
+    assert dlg.resume_button.isVisible() and dlg.session.saved_job.halted
+    assert "Thermal Runaway" in dlg.session.saved_job.check_text()  # the confirmation says why it halted
     saved = json.loads(job.read_text())
     assert saved["status"] == "halted" and saved["gcode"] == dlg.job_gcode_path
     box = window.open_error_boxes()[0]

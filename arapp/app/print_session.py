@@ -9,7 +9,12 @@ thread and are posted to the runner's thread. Sizes in millimetres.
 
 Events: solid_ready(solid), slice_progress(fraction), sliced(result),
 slice_failed(exception, cancelled), preview_changed(spec | None),
-preview_drawn(info) (the live view shows the preview), print_event(PrintEvent), error(title, message).
+preview_drawn(info) (the live view shows the preview), print_event(PrintEvent), error(title, message),
+saved_job_changed(SavedJob | None) (a stopped print that can be resumed, arapp.app.saved_job).
+
+A print that stopped with its state saved is never started over silently:
+`start_print` refuses while `saved_job` is set unless told `start_over`
+(the user chose to), and `resume_print` continues it by the CLI's rules.
 """
 
 from __future__ import annotations
@@ -21,10 +26,12 @@ from pathlib import Path
 from arapp.app.events import Events
 from arapp.app.printlink import PrintEvent, start_job
 from arapp.app.runner import ImmediateRunner
+from arapp.app.saved_job import SavedJob, find_saved_job, load_saved_job, stop_text
 from arapp.app.toolpaths import preview_spec, summarize
 from arapp.placement import Placement, placement_from_any
 from arapp.printing import SliceCancelled, load_profile, placed_solid, slice_mesh
 from arapp.printing.gcode import parse_gcode
+from arapp.printing.link import JobState
 from arapp.printing.prusa import slice_with_prusa
 
 KEEP_SLICES = 10
@@ -72,7 +79,7 @@ class PrintSession:
         self.run = runner or ImmediateRunner()
         self.work_dir = Path(work_dir) if work_dir is not None else default_work_dir()
         self.events = Events("solid_ready", "slice_progress", "sliced", "slice_failed", "preview_changed",
-                             "preview_drawn", "print_event", "error")
+                             "preview_drawn", "print_event", "error", "saved_job_changed")
         self.solid = None
         self.result = None  # arapp.printing SliceResult
         self.gcode_path: str | None = None  # where the user saved the G-code
@@ -88,6 +95,8 @@ class PrintSession:
         self.preview_gen = 0
         self.preview_spec: dict | None = None
         self._slice_task = None
+        self.saved_job: SavedJob | None = None  # a stopped print that can be resumed
+        self._job_profile = None  # the PrinterProfile the running job prints for
 
     def fail(self, title: str, exc: BaseException) -> None:
         self.events.error.emit(title, str(exc) or type(exc).__name__)
@@ -207,23 +216,93 @@ class PrintSession:
     def printing(self) -> bool:
         return self.job is not None
 
-    def start_print(self, target, profile_name: str) -> bool:
+    def _set_saved_job(self, saved: SavedJob | None) -> None:
+        self.saved_job = saved
+        self.events.saved_job_changed.emit(saved)
+
+    def look_for_saved_job(self, profile_name: str | None = None) -> SavedJob | None:
+        """Offer the newest resumable job in `work_dir` (a print that stopped in an earlier run of the app)."""
+        if self.job is not None:
+            return self.saved_job
+        try:
+            profile = load_profile(profile_name) if profile_name else None
+        except (ValueError, OSError):
+            profile = None
+        saved = find_saved_job(self.work_dir, profile)
+        if saved is not None or self.saved_job is not None:
+            self._set_saved_job(saved)
+        return saved
+
+    def start_print(self, target, profile_name: str, start_over: bool = False) -> bool:
         """Send the sliced G-code to `target` (arapp.app.printlink SerialTarget or OctoPrintTarget); False
-        (reported) when the target or profile cannot work."""
+        (reported) when the target or profile cannot work, or when a stopped print could be resumed and
+        `start_over` is not set (the user must choose: Resume, or start the job again)."""
         if self.result is None or self.job is not None:
+            return False
+        if self.saved_job is not None and not start_over:
+            self.events.error.emit("A stopped print can be resumed",
+                                   f"{self.saved_job.executed_text()}\n\nPress Resume to continue it, or choose to "
+                                   "start over (clear the bed first).")
             return False
         job_path = None
         if self.job_gcode_path is not None:
             job_path = str(Path(self.job_gcode_path).with_suffix(".printjob.json"))
         try:
             profile = load_profile(profile_name)
-            self.job = start_job(target, self.result.gcode, profile,
-                                 lambda ev: self.run.post(self.handle_event, ev), job_path=job_path,
-                                 gcode_path=self.job_gcode_path or "")
+            job = start_job(target, self.result.gcode, profile,
+                            lambda ev: self.run.post(self.handle_event, ev), job_path=job_path,
+                            gcode_path=self.job_gcode_path or "")
         except (ValueError, OSError, RuntimeError) as exc:
             self.fail("Printer error", exc)
             return False
+        if self.saved_job is not None:
+            self._discard_saved_job(profile, job_path)
+        self.job, self._job_profile = job, profile
         self.current_layer = -1
+        self.last_progress = None
+        return True
+
+    def _discard_saved_job(self, profile, new_job_path: str | None) -> None:
+        """The user started over: the stopped job's file says so (unless the new job writes that same file),
+        and it is no longer offered."""
+        saved = self.saved_job
+        if saved.job_path != new_job_path:
+            try:
+                state = JobState.load(saved.job_path, profile)
+                state.status, state.message = "cancelled", "started over from the GUI"
+                state.save(saved.job_path)
+            except (ValueError, OSError):
+                pass  # unreadable now: find_saved_job will not offer it either
+        self._set_saved_job(None)
+
+    def resume_print(self, target, profile_name: str | None = None, halt_confirmed: bool = False) -> bool:
+        """Continue `saved_job` on `target` (serial) as `arapp print --resume` does: the job file and its G-code
+        checked again now, the printer brought back by job.resume_commands (homes X and Y only), then the
+        lines not yet executed. A halted job needs `halt_confirmed` (the user read why it halted). False
+        (reported) when it cannot."""
+        saved = self.saved_job
+        if saved is None or self.job is not None:
+            return False
+        if saved.halted and not halt_confirmed:
+            self.events.error.emit("Resume needs your confirmation", saved.check_text())
+            return False
+        try:
+            profile = load_profile(profile_name or self.sliced_profile)
+            saved = load_saved_job(saved.job_path, profile)  # the file may have changed since it was offered
+            gcode = Path(saved.gcode_path).read_text(encoding="utf-8", errors="replace")
+            job = start_job(target, gcode, profile, lambda ev: self.run.post(self.handle_event, ev),
+                            job_path=saved.job_path, gcode_path=saved.gcode_path, resume=saved)
+        except (ValueError, OSError, RuntimeError) as exc:
+            self.fail("Cannot resume the print", exc)
+            return False
+        if self.job_gcode_path != saved.gcode_path:
+            # the preview and its highlight follow the G-code being printed (an earlier slice)
+            self.job_gcode_path = saved.gcode_path
+            self.summary = summarize(parse_gcode(gcode), profile.bed)
+            self.profile, self.sliced_profile = profile, str(profile_name or self.sliced_profile)
+        self.job, self._job_profile = job, profile
+        self._set_saved_job(None)
+        self.current_layer = saved.state.layer
         self.last_progress = None
         return True
 
@@ -235,14 +314,21 @@ class PrintSession:
             self.last_progress = pr
             layer_changed = pr.layer != self.current_layer
             self.current_layer = pr.layer
+        saved = None
+        if ev.finished and ev.error and ev.job_path:
+            try:
+                saved = load_saved_job(ev.job_path, self._job_profile)
+            except (ValueError, OSError):
+                saved = None  # stopped before the first move, or the file is unreadable: not resumable
         if ev.error:
-            message = ev.error
-            if ev.job_path and str(ev.job_path) not in message:
-                message += (f"\n\nThe job state is saved in {ev.job_path}; resume with: "
-                            f"arapp print --resume {ev.job_path}")
-            self.events.error.emit(ev.error_title or "Printer error", message)
+            if ev.finished and ev.job_state is not None:
+                title, message = stop_text(ev.job_state, saved, ev.error)
+            else:
+                title, message = ev.error_title or "Printer error", ev.error
+            self.events.error.emit(title, message)
         if ev.finished:
             self.job = None
+            self._set_saved_job(saved)
         self.events.print_event.emit(ev)
         # the preview's highlight follows the printer's acknowledged lines, as the link reports them
         if self.preview_on and ((layer_changed and pr.layer >= 0 and self.job is not None) or ev.finished):

@@ -29,7 +29,8 @@ class PrintEvent:
     notes and the final event of a job that failed before printing); text: a
     line for the dialog; finished: the job is over (done, cancelled or
     failed); error_title/error: why it failed (for a halt, the printer's own
-    message); job_path: the saved job state to resume from, when there is one.
+    message); job_path: the saved job state to resume from, when there is one;
+    job_state: the link's JobState when the job stopped on a failure (what ran).
     """
 
     progress: object | None = None
@@ -38,6 +39,7 @@ class PrintEvent:
     error_title: str = ""
     error: str | None = None
     job_path: str | None = None
+    job_state: object | None = None
 
 
 def serial_ports() -> list[str]:
@@ -80,11 +82,15 @@ def temperatures(progress) -> dict:
     return out
 
 
-def start_job(target, gcode: str, profile, callback, *, job_path=None, gcode_path: str = "") -> "PrintJob":
+def start_job(target, gcode: str, profile, callback, *, job_path=None, gcode_path: str = "",
+              resume=None) -> "PrintJob":
     """Start printing `gcode` on `target`; callback(PrintEvent) from the job's thread. Raises ValueError/OSError
-    at once for a target that cannot work (no port, no URL, unreadable key file)."""
+    at once for a target that cannot work (no port, no URL, unreadable key file). `resume`: an
+    arapp.app.saved_job.SavedJob to continue (serial links only, as `arapp print --resume`)."""
+    if resume is not None and not isinstance(target, SerialTarget):
+        raise ValueError("a stopped print can be resumed over USB serial only (OctoPrint keeps its own job)")
     job = PrintJob(make_link(target, profile=profile, job_path=job_path), gcode, callback, job_path=job_path,
-                   gcode_path=gcode_path)
+                   gcode_path=gcode_path, resume=resume)
     job.start()
     return job
 
@@ -97,8 +103,9 @@ class PrintJob:
     lifted; OctoPrint runs its own cancel script).
     """
 
-    def __init__(self, link, gcode: str, callback, *, job_path=None, gcode_path: str = ""):
+    def __init__(self, link, gcode: str, callback, *, job_path=None, gcode_path: str = "", resume=None):
         self.link, self.gcode, self.callback = link, gcode, callback
+        self.resume_from = resume  # a SavedJob: its state, program and preamble go to the link
         self.job_path = None if job_path is None else str(job_path)
         self.gcode_path = str(gcode_path)
         self._cancel = threading.Event()
@@ -156,8 +163,14 @@ class PrintJob:
                 self.callback(PrintEvent(text="Cancelled before printing", finished=True))
                 return
             self.callback(PrintEvent(text=f"Connected to {where}; printing"))
+            extra = {}
+            if self.resume_from is not None:
+                r = self.resume_from
+                extra = {"program": r.program, "state": r.state, "preamble": r.preamble()}
+                self.callback(PrintEvent(text=f"Connected to {where}; resuming at line {r.state.next_line + 1:,}: "
+                                              "heating, homing X and Y"))
             self.state = self.link.print_gcode(self.gcode.splitlines(), progress=self._progress,
-                                               cancel=self._cancel, gcode_path=self.gcode_path)
+                                               cancel=self._cancel, gcode_path=self.gcode_path, **extra)
         except PrinterHalted as exc:
             self._failed("The printer halted", exc)
             return
@@ -180,7 +193,8 @@ class PrintJob:
         job_path = getattr(exc, "job_path", None)
         self.callback(PrintEvent(text=f"{title}", finished=True, error_title=title,
                                  error=str(exc) or type(exc).__name__,
-                                 job_path=None if job_path is None else str(job_path)))
+                                 job_path=None if job_path is None else str(job_path),
+                                 job_state=getattr(exc, "job", None)))
 
     def _progress(self, progress) -> None:
         self.callback(PrintEvent(progress=progress, text=progress_text(progress)))

@@ -12,7 +12,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from PySide6.QtCore import QStandardPaths, Signal
-from PySide6.QtWidgets import QDialog, QFileDialog, QHBoxLayout, QLabel, QPushButton, QVBoxLayout
+from PySide6.QtWidgets import QDialog, QFileDialog, QHBoxLayout, QLabel, QMessageBox, QPushButton, QVBoxLayout
+
+from arapp import user_config
 
 from arapp.app import printlink
 from arapp.app.bed_fit import size_text
@@ -52,8 +54,10 @@ class PrintDialog(BedFitPart, BedPreviewPart, QDialog):
         self.resize(560, 640)
         self.session = ps = session
         self.settings = settings
-        ps.work_dir = Path(QStandardPaths.writableLocation(QStandardPaths.StandardLocation.AppDataLocation)
-                           or Path.home() / ".arapp") / "print-jobs"
+        ps.work_dir = user_config.jobs_dir(
+            Path(QStandardPaths.writableLocation(QStandardPaths.StandardLocation.AppDataLocation)
+                 or Path.home() / ".arapp") / "print-jobs")
+        self.ask = self._ask  # (title, text, choices) -> the choice pressed, or "" (tests answer for the user)
         self._profile_path: str | None = None
         self._slider_before_print = 0
         lay = QVBoxLayout(self)
@@ -84,10 +88,12 @@ class PrintDialog(BedFitPart, BedPreviewPart, QDialog):
         ev.preview_drawn.connect(self.preview_shown)
         ev.print_event.connect(self._show_print_event)
         ev.error.connect(self.error.emit)
+        ev.saved_job_changed.connect(self._show_saved_job)
         restore_settings(self, settings)
         self.profile.currentIndexChanged.connect(self.check_fit)
         self.refresh_ports()
         self.print_label.setText(prefill(self))  # the saved Printer set-up: its port or server, not asked again
+        ps.look_for_saved_job(self.profile.currentText())  # a print that stopped in an earlier run
         ps.make_solid()
 
     # -- the session's state, as the window and tests read it --------------------------------
@@ -213,18 +219,72 @@ class PrintDialog(BedFitPart, BedPreviewPart, QDialog):
             raise ValueError(f"baud rate must be a whole number, got {text!r}") from None
         return printlink.SerialTarget(self.port.currentText().strip(), baud)
 
+    def _ask(self, title: str, text: str, choices: list[str]) -> str:
+        """A modal question with `choices` (the first is the default) and Cancel; the choice, "" for Cancel."""
+        box = QMessageBox(QMessageBox.Icon.Question, title, text, QMessageBox.StandardButton.Cancel, self)
+        buttons = {box.addButton(c, QMessageBox.ButtonRole.AcceptRole): c for c in choices}
+        box.setDefaultButton(next(iter(buttons)))
+        box.exec()
+        return buttons.get(box.clickedButton(), "")
+
+    def _show_saved_job(self, saved) -> None:
+        """A stopped print that can be resumed: say what ran, offer Resume."""
+        self.saved_job_label.setVisible(saved is not None)
+        self.resume_button.setVisible(saved is not None)
+        self.resume_button.setEnabled(saved is not None and not self.session.printing)
+        if saved is not None:
+            self.saved_job_label.setText(f"A print stopped before it finished. {saved.executed_text()} "
+                                         "Resume continues it; Print would start it over.")
+
+    def _target_or_report(self):
+        try:
+            return self.target()
+        except ValueError as exc:
+            self.session.fail("Printer error", exc)
+            return None
+
     def start_print(self) -> None:
         ps = self.session
         if ps.result is None or ps.printing:
             return
         self._save_settings()
-        try:
-            target = self.target()
-        except ValueError as exc:
-            self.session.fail("Printer error", exc)
+        start_over = False
+        if ps.saved_job is not None:
+            # never start a job over silently: the half-made part may still be on the bed
+            choice = self.ask("A stopped print can be resumed",
+                              f"{ps.saved_job.executed_text()}\n\nResume it where it stopped, or start the "
+                              "whole print over? Start over only with the bed cleared.",
+                              ["Resume...", "Start over"])
+            if choice == "Resume...":
+                self.resume_print()
+                return
+            if choice != "Start over":
+                return
+            start_over = True
+        target = self._target_or_report()
+        if target is None or not ps.start_print(target, self.profile.currentText(), start_over=start_over):
             return
-        if not ps.start_print(target, self.profile.currentText()):
+        self._printing_started()
+
+    def resume_print(self) -> None:
+        """Resume the stopped print after the user confirmed what it does (arapp.app.saved_job's plain words)."""
+        ps = self.session
+        saved = ps.saved_job
+        if saved is None or ps.printing:
             return
+        target = self._target_or_report()
+        if target is None:
+            return
+        text = f"{saved.executed_text()}\n\n{saved.plan_text()}\n\n{saved.check_text()}"
+        if self.ask("Resume the print?", text, ["Resume"]) != "Resume":
+            return
+        if not ps.resume_print(target, ps.sliced_profile or self.profile.currentText(), halt_confirmed=True):
+            return
+        self._printing_started()
+        self.print_label.setText(f"Resuming at line {saved.state.next_line + 1:,}: heating, homing X and Y...")
+
+    def _printing_started(self) -> None:
+        self.resume_button.setEnabled(False)
         self.temps.clear()
         self.print_progress.setValue(0)
         self.print_progress.setFormat("0.0 %")
@@ -261,6 +321,7 @@ class PrintDialog(BedFitPart, BedPreviewPart, QDialog):
 
     def _print_done(self, ev) -> None:
         self.send_button.setEnabled(self.session.result is not None)
+        self.resume_button.setEnabled(self.session.saved_job is not None)
         self.slice_button.setEnabled(True)
         self.pause_button.setEnabled(False)
         self.pause_button.setText("Pause")

@@ -137,6 +137,13 @@ def send_box(dlg) -> QGroupBox:
     for b in (dlg.send_button, dlg.pause_button, dlg.cancel_print_button):
         row2.addWidget(b)
     sf.addRow(row2)
+    dlg.saved_job_label = QLabel("")
+    dlg.saved_job_label.setWordWrap(True)
+    dlg.saved_job_label.setStyleSheet("color: #a05000; font-weight: bold")
+    dlg.resume_button = _button("Resume the stopped print...", dlg.resume_print)
+    for w in (dlg.saved_job_label, dlg.resume_button):
+        w.setVisible(False)
+        sf.addRow(w)
     dlg.print_progress = QProgressBar()
     dlg.print_progress.setRange(0, 1000)
     dlg.print_progress.setFormat("0.0 %")
