@@ -74,6 +74,10 @@ class BoardDetector:
         if self.board.kind == "charuco":
             cc, ci, _, _ = self.det.detectBoard(gray)
             if ci is None or len(ci) < self.min_corners:
+                # a board printed white-on-black (as some calibration tools print them): its chessboard
+                # corners lie where they lie on the inverted image
+                cc, ci, _, _ = self.det.detectBoard(cv2.bitwise_not(gray))
+            if ci is None or len(ci) < self.min_corners:
                 return None
             ci = ci.ravel()
             return self.chess[ci], cc.reshape(-1, 2).astype(np.float64), ci

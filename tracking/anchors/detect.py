@@ -1,6 +1,16 @@
 """ArUco and ChArUco detection for a session's anchors, with subpixel corners and optional regions of interest.
 
 Corners are distorted pixel coordinates (pixel centres at integers).
+
+Polarity: a board printed white-on-black (several calibration tools print ChArUco boards so) is found
+as well as a normal one. An anchor's `polarity` (AnchorSpec.polarity) is "auto" by default: each
+dictionary's anchors are looked for in the polarity they were last seen in (normal at first), and in
+the other one only when none of them is found that way (a board is printed one way), on the inverted
+image. So a normal board in view costs nothing extra, and its corners are exactly what they were (OpenCV's
+`detectInvertedMarker` would do both in one pass for a few percent, but it picks other contours of
+normal markers as well: corners moved by up to 5 px before the edge fit). The polarity each anchor was
+last found in is kept in `ArucoDetection.polarity`. "normal" or "inverted" pins one: the other is
+never tried.
 """
 
 from __future__ import annotations
@@ -57,9 +67,10 @@ class ArucoDetection:
     def __init__(self, models: list[AnchorModel], camera: Camera):
         self.camera = camera
         self.models = [m for m in models if m.anchor_kind.detector in ARUCO_FAMILIES]
-        self.by_dict: dict[str, dict[int, AnchorModel]] = {}  # dictionary name (or file) -> id -> anchor
+        # (dictionary name (or file), polarity "auto" / "normal" / "inverted") -> id -> anchor
+        self.by_dict: dict[tuple[str, str], dict[int, AnchorModel]] = {}
         for m in self.models:
-            ids = self.by_dict.setdefault(m.spec.dictionary, {})
+            ids = self.by_dict.setdefault((m.spec.dictionary, m.spec.polarity), {})
             for mid in m.markers:
                 ids[mid] = m
         # Corners come from edge fitting (edges.py), more exact than the detector's own subpixel step.
@@ -67,9 +78,12 @@ class ArucoDetection:
         params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
         # marker side in cells (bits + black border), by dictionary name; also by AnchorSpec.dictionary_id,
         # the key other modules use (for a dictionary file that is its path, the same as the name)
-        self.bits = {d: aruco_dictionary(d).markerSize + 2 for d in self.by_dict}
+        self.bits = {d: aruco_dictionary(d).markerSize + 2 for d, _ in self.by_dict}
         self.bits.update({m.spec.dictionary_id: self.bits[m.spec.dictionary] for m in self.models})
-        self.detectors = {d: cv2.aruco.ArucoDetector(aruco_dictionary(d), params) for d in self.by_dict}
+        # one detector per dictionary and polarity pin; inverted markers are read on the inverted image
+        self.detectors = {key: cv2.aruco.ArucoDetector(aruco_dictionary(key[0]), params) for key in self.by_dict}
+        # anchor index -> "normal" / "inverted": the polarity its markers had when last detected
+        self.polarity: dict[int, str] = {}
         # a lone marker's edges are sampled over its sides from this fraction on (edges.refine_squares
         # end_margin, weak steps left out); None: as a board's, 0.2 (set by AnchorTracker)
         self.lone_end_margin: float | None = None
@@ -93,18 +107,19 @@ class ArucoDetection:
             gray = gray[y0:y1, x0:x1]
         per_anchor: dict[int, list] = {}
         foreign = 0
-        for d, det in self.detectors.items():
-            corners, ids, _ = det.detectMarkers(gray)
-            if ids is None:
-                continue
-            # all markers' corners in full-image pixels at once
-            quads_all = np.concatenate(corners).reshape(-1, 4, 2).astype(np.float64) + [x0, y0]
-            for c, mid in zip(quads_all, ids.ravel().tolist()):
-                m = self.by_dict[d].get(mid)
-                if m is None:
-                    foreign += 1
-                    continue
-                per_anchor.setdefault(m.index, []).append((mid, c, d))
+        self._negative = None
+        for (d, pin), det in self.detectors.items():
+            ours = self.by_dict[(d, pin)]
+            first = pin if pin != "auto" else self._last_polarity(ours)
+            found, foreign_here = self._markers(det, gray, first, ours, (x0, y0))
+            foreign += foreign_here
+            if not found and pin == "auto":
+                # none of them in the polarity they were last seen in: the other print
+                first = "inverted" if first == "normal" else "normal"
+                found, _ = self._markers(det, gray, first, ours, (x0, y0))
+            for mid, c in found:
+                self.polarity[ours[mid].index] = first
+                per_anchor.setdefault(ours[mid].index, []).append((mid, c, d))
         self.last_foreign = foreign
         out = []
         for m in self.models:
@@ -136,6 +151,27 @@ class ArucoDetection:
             groups = np.repeat([mid for mid, _ in found], 4)
             out.append(Observation(m.index, obj, img, groups, len(found), square=m.anchor_kind.single_square))
         return out
+
+    def _last_polarity(self, ours: dict[int, AnchorModel]) -> str:
+        """The polarity most of these anchors were last found in ("normal" when none was found yet)."""
+        seen = [self.polarity[i] for i in {m.index for m in ours.values()} if i in self.polarity]
+        return "inverted" if 2 * seen.count("inverted") > len(seen) else "normal"
+
+    def _markers(self, det, gray: np.ndarray, polarity: str, ours: dict[int, AnchorModel],
+                 offset: tuple[int, int]) -> tuple[list[tuple[int, np.ndarray]], int]:
+        """([(id, (4,2) corners in full-image pixels)] of the markers with ids in `ours`, count of the others)
+        that `det` finds in `gray` read as `polarity` ("inverted": on the inverted image, kept for the frame)."""
+        if polarity == "inverted":
+            if self._negative is None:
+                self._negative = cv2.bitwise_not(gray)
+            gray = self._negative
+        corners, ids, _ = det.detectMarkers(gray)
+        if ids is None:
+            return [], 0
+        # all markers' corners in full-image pixels at once
+        quads = np.concatenate(corners).reshape(-1, 4, 2).astype(np.float64) + offset
+        found = [(mid, c) for c, mid in zip(quads, ids.ravel().tolist()) if mid in ours]
+        return found, len(ids) - len(found)
 
     def _edge_span(self, models: list[AnchorModel]) -> dict:
         """refine_squares' end_margin / strong_only for quads of these anchors (lone markers: `lone_end_margin`)."""

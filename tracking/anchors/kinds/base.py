@@ -24,6 +24,10 @@ from tracking.errors import SessionError
 # Keys every anchor block may carry besides its kind's own fields (session.py reads world_from_anchor).
 ANY_KIND_KEYS = ("kind", "world_from_anchor")
 
+# `polarity` of a marker-based anchor: "normal" (black markers on white paper), "inverted" (white on black,
+# as some calibration tools print boards) or "auto" (the default: both are looked for, see anchors/detect.py)
+POLARITIES = ("auto", "normal", "inverted")
+
 
 def mm(metres: float) -> str:
     """'50 mm' for 0.05 (metres shown in millimetres, as users measure prints)."""
@@ -84,7 +88,7 @@ class AnchorKind:
 
     name = ""
     required: dict = {}
-    optional: dict = {"first_id": int}
+    optional: dict = {"first_id": int, "polarity": str}
     written: tuple = ()
     positive: tuple = ()
     counts: tuple = ()
@@ -120,6 +124,9 @@ class AnchorKind:
         for key in self.non_negative:
             if values[key] < 0:
                 raise SessionError(f"{where}.{key}: must not be negative")
+        if values.get("polarity", "auto") not in POLARITIES:
+            raise SessionError(f"{where}.polarity: must be one of {', '.join(POLARITIES)} (\"inverted\": white "
+                               f"markers on black), got {values['polarity']!r}")
         if "dictionary" in values:
             values["dictionary"] = self._dictionary(values["dictionary"], where, folder)
         spec = AnchorSpec.create(self.name, values)

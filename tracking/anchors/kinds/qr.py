@@ -24,6 +24,7 @@ class QRKind(AnchorKind):
 
     name = "qr"
     required = {"text": str, "length": float}
+    optional = {"first_id": int}   # no polarity: a QR code is read dark on light
     positive = ("length",)
     detector = "qr"
     cli_name = "qr"

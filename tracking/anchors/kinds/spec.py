@@ -61,6 +61,12 @@ class AnchorSpec:
         return cls(kind=kind, **named, params=params)
 
     @property
+    def polarity(self) -> str:
+        """"auto" (default), "normal" or "inverted" (white markers on black): which print the detector
+        accepts (kinds/base.py POLARITIES; a QR anchor is always "auto")."""
+        return self.params.get("polarity", "auto")
+
+    @property
     def anchor_kind(self):
         """The registered `AnchorKind` of this spec (tracking/anchors/kinds)."""
         return kind_named(self.kind)
