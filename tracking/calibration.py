@@ -16,6 +16,17 @@ import numpy as np
 
 from tracking.anchors.kinds import AnchorSpec
 from tracking.anchors.kinds.charuco import charuco_board
+from tracking.calibration_quality import (
+    CORNERS,
+    PARAMS,
+    SPREAD_SIGMAS,
+    estimate_error,
+    free_params,
+    image_corner_pixels,
+    intrinsic_covariance,
+    missing_corners,
+    projection_spread,
+)
 from tracking.camera import Camera
 from tracking.errors import CalibrationError
 
@@ -31,6 +42,16 @@ class BoardSpec:
     square_length: float
     marker_length: float | None = None
     dictionary: str = "DICT_5X5_100"
+    first_id: int = 0
+
+    @classmethod
+    def from_anchor(cls, spec: AnchorSpec, where: str = "anchors") -> "BoardSpec":
+        """The board of a `charuco` anchor (an anchors file's block), e.g. what `arapp markers charuco` wrote."""
+        if spec.kind != "charuco":
+            raise CalibrationError(f"{where}: a {spec.kind} anchor is not a calibration board; calibrate with a "
+                                   "charuco one (`arapp markers charuco` prints one and writes its anchors file)")
+        return cls("charuco", spec.squares_x, spec.squares_y, spec.square_length, spec.marker_length, spec.dictionary,
+                   spec.first_id)
 
     def __post_init__(self):
         if self.kind not in ("charuco", "chessboard"):
@@ -49,7 +70,7 @@ class BoardSpec:
         """The OpenCV board, made as a `charuco` anchor's (tracking/anchors/kinds/charuco.py), ids from 0."""
         return charuco_board(AnchorSpec("charuco", dictionary=self.dictionary, squares_x=self.squares_x,
                                         squares_y=self.squares_y, square_length=self.square_length,
-                                        marker_length=self.marker_length))
+                                        marker_length=self.marker_length, first_id=self.first_id))
 
     def corner_count(self) -> int:
         return (self.squares_x - 1) * (self.squares_y - 1)
@@ -168,18 +189,48 @@ class ViewCollector:
 
 @dataclass
 class CalibrationResult:
+    """A solved calibration. `std`: 1 sigma of each estimated parameter (tracking.calibration_quality.PARAMS
+    names; from cv2.calibrateCameraExtended), `fixed`: distortion terms held at 0 by the coverage rule,
+    `missing_corners`: image corner regions no view reached, `spread_centre_px` / `spread_corners_px`
+    (CORNERS order): 2 sigma spread of where a ray lands, at the centre and the image corners, against
+    `estimate_corners_px`, what the estimated camera is off by there; `refusal`: why the result is worse
+    than the estimated camera (None when it is not)."""
+
     camera: Camera
     rms: float
     per_view: list[float]
     used: list[int]
     dropped: list[int]
     coverage: float
+    std: dict = field(default_factory=dict)
+    fixed: list[str] = field(default_factory=list)
+    missing_corners: list[str] = field(default_factory=list)
+    spread_centre_px: float = float("nan")
+    spread_corners_px: list[float] = field(default_factory=list)
+    estimate_corners_px: list[float] = field(default_factory=list)
+    refusal: str | None = None
+
+    def _pm(self, name: str, value: float, digits: int) -> str:
+        if name in self.fixed:
+            return f"{name} {value:.{digits}f} (fixed)"
+        sd = self.std.get(name)
+        return f"{name} {value:.{digits}f}" + (f" +/- {sd:.{digits}f}" if sd is not None else "")
 
     def report(self, names: list[str] | None = None) -> str:
+        cam = self.camera
         lines = [f"RMS reprojection error {self.rms:.3f} px over {len(self.used)} views; coverage "
                  f"{self.coverage * 100:.0f} % of the image",
-                 f"fx {self.camera.fx:.2f}  fy {self.camera.fy:.2f}  cx {self.camera.cx:.2f}  cy {self.camera.cy:.2f}",
-                 "dist " + " ".join(f"{d:.5f}" for d in self.camera.dist)]
+                 "  ".join(self._pm(n, v, 2) for n, v in zip(("fx", "fy", "cx", "cy"), (cam.fx, cam.fy, cam.cx, cam.cy))),
+                 "dist " + "  ".join(self._pm(n, float(v), 5) for n, v in zip(("k1", "k2", "p1", "p2", "k3"), cam.dist))]
+        if self.fixed:
+            plural = "s" if len(self.missing_corners) > 1 else ""
+            lines.append(f"{', '.join(self.fixed)} held fixed: no view reached the {', '.join(self.missing_corners)} "
+                         f"corner{plural} of the image (show the board there to estimate {'it' if len(self.fixed) == 1 else 'them'})")
+        if self.spread_corners_px:
+            k = int(np.argmax(self.spread_corners_px))
+            lines.append(f"projection uncertainty (2 sigma): {self.spread_centre_px:.2f} px at the centre, "
+                         f"{self.spread_corners_px[k]:.2f} px at the {CORNERS[k]} corner (the estimated camera is "
+                         f"off by ~{self.estimate_corners_px[k]:.0f} px there)")
         for i, e in zip(self.used, self.per_view):
             lines.append(f"  view {i:3d} {names[i] if names else '':>20s}  {e:.3f} px")
         for i in self.dropped:
@@ -188,12 +239,21 @@ class CalibrationResult:
 
 
 MIN_VIEWS = 3  # fewest board views that determine fx, fy, cx, cy and five distortion terms
+# held at 0 unless the views reach all four image corners (tracking.calibration_quality's coverage rule)
+PARTIAL_COVERAGE_FLAGS = cv2.CALIB_FIX_K3
 
 
 def solve(views: list[View], width: int, height: int, coverage: float = float("nan"), min_views: int = 5,
-          flags: int = 0, outlier_factor: float = 3.0) -> CalibrationResult:
-    """cv2.calibrateCamera on the views (k1 k2 p1 p2 k3); views whose RMS error exceeds `outlier_factor`
-    times the median are dropped once and the solve repeated."""
+          flags: int | None = None, outlier_factor: float = 3.0, refuse: bool = True,
+          guess: Camera | None = None) -> CalibrationResult:
+    """cv2.calibrateCameraExtended on the views; views whose RMS error exceeds `outlier_factor` times the
+    median are dropped once and the solve repeated.
+
+    flags None: the coverage rule of tracking.calibration_quality (k1 k2 p1 p2 k3 when the views reach
+    all four image corners, else k3 fixed at 0); an int: those cv2.CALIB_* flags. `guess`: a camera
+    of this image size to start from (cv2.CALIB_USE_INTRINSIC_GUESS); the terms the rule fixes keep its values. With `refuse`,
+    a result worse than the estimated camera (its `refusal`) raises CalibrationError saying which views
+    to add."""
     if min_views < MIN_VIEWS:
         raise CalibrationError(f"min_views is {min_views}; a calibration needs at least {MIN_VIEWS} views of the "
                                "board (intrinsics and distortion are not determined by fewer)")
@@ -203,9 +263,15 @@ def solve(views: list[View], width: int, height: int, coverage: float = float("n
     used = list(range(len(views)))
     dropped: list[int] = []
     for _ in range(2):
+        missing = missing_corners([views[i].img for i in used], width, height)
+        run_flags = (PARTIAL_COVERAGE_FLAGS if missing else 0) if flags is None else flags
+        K0, d0 = (None, None) if guess is None else (guess.K.copy(), guess.dist[:5].copy().reshape(-1, 1))
+        if guess is not None:
+            run_flags |= cv2.CALIB_USE_INTRINSIC_GUESS
         obj = [views[i].obj.astype(np.float32).reshape(-1, 1, 3) for i in used]
         img = [views[i].img.astype(np.float32).reshape(-1, 1, 2) for i in used]
-        rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(obj, img, (width, height), None, None, flags=flags)
+        rms, K, dist, rvecs, tvecs, std_in, _, _ = cv2.calibrateCameraExtended(
+            obj, img, (width, height), K0, d0, flags=run_flags)
         per = []
         for o, p, r, t in zip(obj, img, rvecs, tvecs):
             proj, _ = cv2.projectPoints(o, r, t, K, dist)
@@ -216,4 +282,26 @@ def solve(views: list[View], width: int, height: int, coverage: float = float("n
             break
         dropped = bad
         used = [i for i in used if i not in bad]
-    return CalibrationResult(Camera(K, dist.ravel()[:5], width, height), float(rms), per, used, dropped, coverage)
+    dist5 = dist.ravel()[:5]
+    free = free_params(run_flags)
+    std = {PARAMS[i]: float(std_in.ravel()[i]) for i in free}
+    fixed = [PARAMS[i] for i in (4, 5, 6, 7, 8) if i not in free]
+    cov, _ = intrinsic_covariance(obj, img, rvecs, tvecs, K, dist5, run_flags)
+    corners = image_corner_pixels(width, height)
+    spread = SPREAD_SIGMAS * projection_spread(K, dist5, cov, free, np.vstack([corners, [(width - 1) / 2, (height - 1) / 2]]))
+    est = estimate_error(width, height, corners)
+    result = CalibrationResult(Camera(K, dist5, width, height), float(rms), per, used, dropped, coverage, std, fixed,
+                               missing, float(spread[4]), [float(x) for x in spread[:4]], [float(x) for x in est])
+    worse = [k for k in range(4) if not spread[k] < est[k]]
+    if worse:
+        k = max(worse, key=lambda j: spread[j] / est[j])
+        where = (f"add views with the board near the {', '.join(missing)} corner{'s' if len(missing) > 1 else ''} "
+                 "of the image" if missing else "add views with the board nearer the image corners, tilted, and "
+                 "at several distances")
+        f_pct = 100 * SPREAD_SIGMAS * std.get("fx", 0.0) / max(result.camera.fx, 1e-9)
+        result.refusal = (f"calibration refused: from these {len(used)} views a ray at the {CORNERS[k]} image corner "
+                          f"lands within +/-{spread[k]:.0f} px (2 sigma; fx +/-{f_pct:.1f} %), worse than the estimated "
+                          f"camera's ~{est[k]:.0f} px there; {where}, then calibrate again")
+        if refuse:
+            raise CalibrationError(result.refusal)
+    return result

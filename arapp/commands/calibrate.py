@@ -7,6 +7,10 @@ def add_arguments(parser):
     src = parser.add_mutually_exclusive_group(required=True)
     src.add_argument("--source", help="camera or video to read views from (v4l2:0, depthai, a video file, a recording)")
     src.add_argument("--images", help="folder of still images of the board (png, jpg, bmp, tif)")
+    parser.add_argument("--anchors", help="anchors JSON whose charuco anchor is the board (what `arapp markers charuco` "
+                        "writes next to the sheet); replaces --board, --squares-*, --*-length and --dictionary")
+    parser.add_argument("--calibration", help="a calibration to start from (OpenCV FileStorage or ROS camera_info YAML); "
+                        "the distortion terms the views cannot determine keep its values")
     parser.add_argument("--board", choices=["charuco", "chessboard"], default="charuco", help="board kind (default charuco)")
     parser.add_argument("--squares-x", type=int, default=7, help="squares along x (default 7)")
     parser.add_argument("--squares-y", type=int, default=5, help="squares along y (default 5)")
@@ -52,8 +56,19 @@ def run(args) -> int:
     from tracking.errors import CalibrationError
 
     check_args(args)
-    board = BoardSpec(args.board, args.squares_x, args.squares_y, args.square_length,
-                      args.marker_length if args.board == "charuco" else None, args.dictionary)
+    if args.anchors:
+        from tracking.session import parse_anchors, read_anchor_blocks
+
+        specs = parse_anchors(read_anchor_blocks(args.anchors), where=f"{args.anchors}: anchors")
+        board = BoardSpec.from_anchor(specs[0], f"{args.anchors}: anchors[0]")
+        print(f"board from {args.anchors}: {specs[0].anchor_kind.describe(specs[0])}")
+    else:
+        board = BoardSpec(args.board, args.squares_x, args.squares_y, args.square_length,
+                          args.marker_length if args.board == "charuco" else None, args.dictionary)
+    if args.calibration:
+        from tracking.calibration_file import read_calibration_file
+
+        read_calibration_file(args.calibration)  # a bad file is refused before any view is looked at
     col = ViewCollector(board, min_sharpness=args.min_sharpness)
     names = []
 
@@ -89,7 +104,16 @@ def run(args) -> int:
                 if len(col.views) >= args.max_views:
                     break
     print(f"rejected: {col.rejected}")
-    res = solve(col.views, col.width, col.height, col.coverage, min_views=args.min_views)
+    guess = None
+    if args.calibration and col.views:
+        from tracking.camera import Camera
+        from tracking.sources.base import _fit_camera
+
+        cam, notes = Camera.load_file(args.calibration, (col.width, col.height))
+        for line in notes:
+            print(line)
+        guess = _fit_camera(cam, col.width, col.height, args.calibration, "the views")
+    res = solve(col.views, col.width, col.height, col.coverage, min_views=args.min_views, guess=guess)
     print(res.report(names))
     if col.coverage < 0.5:
         print(f"warning: the board covered only {col.coverage * 100:.0f} % of the image; views near the edges and "
