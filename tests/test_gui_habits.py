@@ -326,7 +326,7 @@ def test_too_big_for_the_bed_is_caught_before_slicing_and_scaled_to_fit(qtbot, w
     assert "larger than the bed" in dlg.fit_label.text() and "--" not in dlg.fit_label.text()  # no CLI flags
     dlg.fit_button.click()
     qtbot.waitUntil(lambda: dlg.solid is not None, timeout=TIMEOUT_MS)
-    bed = load_profile(dlg.profile.currentText()).bed
+    bed = load_profile(dlg.profile_key()).bed
     ext = dlg.solid.extents
     assert ext[0] <= bed.width and ext[1] <= bed.depth and ext[2] <= bed.height
     assert max(ext) > 0.9 * min(bed.width, bed.depth, bed.height) - 20  # shrunk to fit, not to nothing

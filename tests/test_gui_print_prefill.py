@@ -45,7 +45,7 @@ def test_octoprint_from_the_setup_uses_the_stored_key(qtbot, window, tmp_path):
     dlg = print_panel(qtbot, window)
     assert dlg.use_octoprint.isChecked() and dlg.octoprint_url.text() == url
     assert dlg.api_key_file.text() == ""  # not asked for again
-    assert dlg.profile.currentText() == str(profile)
+    assert dlg.profile_key() == str(profile)
     t = dlg.target()
     assert isinstance(t, OctoPrintTarget) and t.url == url
     assert load_api_key(t.api_key_file) == KEY

@@ -24,12 +24,13 @@ import time
 from pathlib import Path
 
 from arapp.app.events import Events
+from arapp.app.printers import resolve_profile
 from arapp.app.printlink import PrintEvent, start_job
 from arapp.app.runner import ImmediateRunner
 from arapp.app.saved_job import SavedJob, find_saved_job, load_saved_job, stop_text
 from arapp.app.toolpaths import preview_spec, summarize
 from arapp.placement import Placement, placement_from_any
-from arapp.printing import SliceCancelled, load_profile, placed_solid, slice_mesh
+from arapp.printing import SliceCancelled, placed_solid, slice_mesh
 from arapp.printing.gcode import parse_gcode
 from arapp.printing.link import JobState
 from arapp.printing.prusa import slice_with_prusa
@@ -127,7 +128,7 @@ class PrintSession:
         try:
             if slicer not in SLICERS:
                 raise ValueError(f"unknown slicer {slicer!r}; the slicers are {', '.join(SLICERS)}")
-            profile = load_profile(profile_name)
+            profile = resolve_profile(profile_name)
         except (ValueError, OSError) as exc:
             self.fail("Cannot slice", exc)
             return False
@@ -225,7 +226,7 @@ class PrintSession:
         if self.job is not None:
             return self.saved_job
         try:
-            profile = load_profile(profile_name) if profile_name else None
+            profile = resolve_profile(profile_name) if profile_name else None
         except (ValueError, OSError):
             profile = None
         saved = find_saved_job(self.work_dir, profile)
@@ -248,7 +249,7 @@ class PrintSession:
         if self.job_gcode_path is not None:
             job_path = str(Path(self.job_gcode_path).with_suffix(".printjob.json"))
         try:
-            profile = load_profile(profile_name)
+            profile = resolve_profile(profile_name)
             job = start_job(target, self.result.gcode, profile,
                             lambda ev: self.run.post(self.handle_event, ev), job_path=job_path,
                             gcode_path=self.job_gcode_path or "")
@@ -287,7 +288,7 @@ class PrintSession:
             self.events.error.emit("Resume needs your confirmation", saved.check_text())
             return False
         try:
-            profile = load_profile(profile_name or self.sliced_profile)
+            profile = resolve_profile(profile_name or self.sliced_profile)
             saved = load_saved_job(saved.job_path, profile)  # the file may have changed since it was offered
             gcode = Path(saved.gcode_path).read_text(encoding="utf-8", errors="replace")
             job = start_job(target, gcode, profile, lambda ev: self.run.post(self.handle_event, ev),

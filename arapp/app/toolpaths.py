@@ -24,7 +24,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from arapp.printing import load_profile
+from arapp.app.printers import resolve_profile
 from arapp.printing.gcode import parse_gcode
 from arapp.toolpath_overlay import OUT_OF_BED_COLOUR, out_of_bed, toolpath_line_sets, world_from_bed
 
@@ -106,7 +106,7 @@ class ToolpathBuilder:
         version = self._version(p) if p is not None and p.is_file() else ()
         hit = self._profiles.get(key)
         if hit is None or hit[0] != version:
-            profile = load_profile(printer)
+            profile = resolve_profile(printer)
             if profile.bed_from_anchor is None:
                 raise ValueError(f"printer profile {profile.source} has no bed_anchor; add one with its "
                                  "bed_from_anchor (docs/printer-profile.md, or 'arapp printer bed-anchor') so the toolpaths "

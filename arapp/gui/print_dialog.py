@@ -20,7 +20,7 @@ from arapp.app import printlink
 from arapp.app.bed_fit import size_text
 from arapp.app.print_session import PrintSession, prune_slices
 from arapp.gui.print_dialog_parts import BedFitPart, BedPreviewPart
-from arapp.gui.print_setup_prefill import prefill, with_setup_key
+from arapp.gui.print_setup_prefill import prefill, remember_printer, with_setup_key
 from arapp.gui.print_widgets import (
     OTHER_PROFILE, preview_box, restore_settings, send_box, settings_values, slicing_box,
 )
@@ -93,7 +93,7 @@ class PrintDialog(BedFitPart, BedPreviewPart, QDialog):
         self.profile.currentIndexChanged.connect(self.check_fit)
         self.refresh_ports()
         self.print_label.setText(prefill(self))  # the saved Printer set-up: its port or server, not asked again
-        ps.look_for_saved_job(self.profile.currentText())  # a print that stopped in an earlier run
+        ps.look_for_saved_job(self.profile_key())  # a print that stopped in an earlier run
         ps.make_solid()
 
     # -- the session's state, as the window and tests read it --------------------------------
@@ -116,20 +116,27 @@ class PrintDialog(BedFitPart, BedPreviewPart, QDialog):
             for k, v in settings_values(self).items():
                 self.settings.setValue(f"print/{k}", v)
 
+    def profile_key(self) -> str:
+        """The printer chosen (an arapp.app.printers key: "preset:KEY", a shipped name or a profile file)."""
+        data = self.profile.currentData()
+        return str(data) if data else self.profile.currentText()
+
     def profile_activated(self, index: int) -> None:
-        if self.profile.itemText(index) == OTHER_PROFILE:
+        """The user chose a printer: it becomes the one printer choice (Printer set-up's too)."""
+        if self.profile.itemData(index) == OTHER_PROFILE:
             path, _ = QFileDialog.getOpenFileName(self, "Printer profile", str(Path.cwd()), "Printer profile (*.json)")
             if path:
                 self.set_profile_path(path)
             else:
                 self.profile.setCurrentIndex(0)
+        remember_printer(self.profile_key())
 
     def set_profile_path(self, path: str) -> None:
         """Use the printer profile file at `path` (as 'Other profile file...' does)."""
         path = str(path)
-        idx = self.profile.findText(path)
+        idx = self.profile.findData(path)
         if idx < 0:
-            self.profile.insertItem(0, path)
+            self.profile.insertItem(0, path, path)
             idx = 0
         self._profile_path = path
         self.profile.setCurrentIndex(idx)
@@ -158,7 +165,7 @@ class PrintDialog(BedFitPart, BedPreviewPart, QDialog):
             b.setEnabled(on)
         self.slice_progress.setValue(0)
         self.slice_label.setText("Slicing...")
-        if not self.session.slice(settings, self.profile.currentText(), self.slicer.currentText()):
+        if not self.session.slice(settings, self.profile_key(), self.slicer.currentText()):
             self._slice_finished()
 
     def _slice_progress(self, fraction: float) -> None:
@@ -262,7 +269,7 @@ class PrintDialog(BedFitPart, BedPreviewPart, QDialog):
                 return
             start_over = True
         target = self._target_or_report()
-        if target is None or not ps.start_print(target, self.profile.currentText(), start_over=start_over):
+        if target is None or not ps.start_print(target, self.profile_key(), start_over=start_over):
             return
         self._printing_started()
 
@@ -278,7 +285,7 @@ class PrintDialog(BedFitPart, BedPreviewPart, QDialog):
         text = f"{saved.executed_text()}\n\n{saved.plan_text()}\n\n{saved.check_text()}"
         if self.ask("Resume the print?", text, ["Resume"]) != "Resume":
             return
-        if not ps.resume_print(target, ps.sliced_profile or self.profile.currentText(), halt_confirmed=True):
+        if not ps.resume_print(target, ps.sliced_profile or self.profile_key(), halt_confirmed=True):
             return
         self._printing_started()
         self.print_label.setText(f"Resuming at line {saved.state.next_line + 1:,}: heating, homing X and Y...")

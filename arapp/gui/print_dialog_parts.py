@@ -7,7 +7,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from arapp.app.bed_fit import bed_fit
-from arapp.printing import load_profile
+from arapp.app.printers import resolve_profile
 
 
 class BedFitPart:
@@ -19,7 +19,7 @@ class BedFitPart:
         if solid is None:
             return
         try:
-            fit = bed_fit(solid.extents, load_profile(self.profile.currentText()), self.slice_settings())
+            fit = bed_fit(solid.extents, resolve_profile(self.profile_key()), self.slice_settings())
         except (ValueError, OSError):
             fit = None  # an unreadable profile or setting: slicing reports it
         self._show_fit(fit)

@@ -12,7 +12,8 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
-from arapp.gui.printer_setup import saved_choice
+from arapp import user_config
+from arapp.gui.printer_setup import STATE_KEY, saved_choice
 from arapp.printing import connection_check as cc
 from arapp.printing.link import OctoPrintTarget
 
@@ -30,7 +31,9 @@ def prefill(dlg) -> str:
     if not choice:
         return ""
     profile = choice.get("profile")
-    if isinstance(profile, str) and profile and not profile.startswith("preset:") and Path(profile).is_file():
+    if isinstance(profile, str) and profile.startswith("preset:") and dlg.profile.findData(profile) >= 0:
+        dlg.profile.setCurrentIndex(dlg.profile.findData(profile))  # the set-up's printer, not the panel's last
+    elif isinstance(profile, str) and profile and Path(profile).is_file():
         dlg.set_profile_path(profile)
     if choice.get("link") == "octoprint" and choice.get("url"):
         url = str(choice["url"]).strip()
@@ -46,6 +49,13 @@ def prefill(dlg) -> str:
         dlg.baud.setCurrentText(str(int(choice.get("baud") or 115200)))
         return f"From Printer set-up: {choice['port']} at {int(choice.get('baud') or 115200)} baud"
     return ""
+
+
+def remember_printer(key: str) -> None:
+    """The printer chosen in the print panel becomes the set-up's choice too (one printer choice)."""
+    choice = saved_choice()
+    if key and choice.get("profile") != key:
+        user_config.remember(STATE_KEY, {**choice, "profile": key})
 
 
 def with_setup_key(target):

@@ -7,6 +7,8 @@ the print session.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (
     QCheckBox, QComboBox, QDoubleSpinBox, QFormLayout, QGroupBox, QHBoxLayout, QLabel, QLineEdit, QProgressBar,
@@ -16,7 +18,7 @@ from PySide6.QtWidgets import (
 from arapp.app.print_session import SLICERS
 from arapp.gui.temperature_graph import TemperatureGraph
 from arapp.printing import MATERIALS
-from arapp.printing.profile import shipped_profiles
+from arapp.app.printers import printer_choices
 
 OTHER_PROFILE = "Other profile file..."
 
@@ -45,8 +47,9 @@ def slicing_box(dlg) -> QGroupBox:
     box = QGroupBox("Slicing")
     form = QFormLayout(box)
     dlg.profile = QComboBox()
-    dlg.profile.addItems(shipped_profiles())
-    dlg.profile.addItem(OTHER_PROFILE)
+    for label, key in printer_choices():
+        dlg.profile.addItem(label, key)
+    dlg.profile.addItem(OTHER_PROFILE, OTHER_PROFILE)
     dlg.profile.activated.connect(dlg.profile_activated)
     dlg.material = QComboBox()
     dlg.material.addItems(list(MATERIALS))
@@ -164,7 +167,7 @@ def send_box(dlg) -> QGroupBox:
 
 def settings_values(dlg) -> dict:
     """The dialog's choices as stored under print/ in the settings."""
-    return {"profile": dlg.profile.currentText(), "material": dlg.material.currentText(),
+    return {"profile": dlg.profile_key(), "material": dlg.material.currentText(),
             "layer_height": dlg.layer_height.value(), "infill": dlg.infill.value(),
             "perimeters": dlg.perimeters.value(), "slicer": dlg.slicer.currentText(), "octoprint_url": dlg.octoprint_url.text(),
             "api_key_file": dlg.api_key_file.text(),
@@ -174,8 +177,11 @@ def settings_values(dlg) -> dict:
 def restore_settings(dlg, settings) -> None:
     """Set the dialog's widgets from the stored choices (defaults without settings)."""
     get = (lambda k, d: settings.value(f"print/{k}", d)) if settings is not None else (lambda k, d: d)
-    idx = dlg.profile.findText(str(get("profile", "generic")))
-    if idx >= 0:
+    key = str(get("profile", "generic"))
+    idx = dlg.profile.findData(key)
+    if idx < 0 and Path(key).is_file():
+        dlg.set_profile_path(key)
+    elif idx >= 0:
         dlg.profile.setCurrentIndex(idx)
     dlg.material.setCurrentText(str(get("material", "PLA")))
     dlg.layer_height.setValue(float(get("layer_height", 0.2)))
