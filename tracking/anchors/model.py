@@ -13,6 +13,7 @@ import numpy as np
 from tracking.anchors.kinds import AnchorKind, square_corners
 from tracking.anchors.kinds.aruco_board import grid_board
 from tracking.anchors.kinds.charuco import charuco_board
+from tracking.anchors.kinds.qr import normal_text
 from tracking.errors import SessionError
 from tracking.poses import transform_points
 from tracking.session import AnchorSpec
@@ -65,11 +66,13 @@ def build_models(anchors: list[AnchorSpec]) -> list[AnchorModel]:
     for i, a in enumerate(anchors):
         m = AnchorModel(i, a)
         m.markers, m.chess, m.board = a.anchor_kind.geometry(a)
-        if a.anchor_kind.detector == "qr":  # a QR anchor is told apart by its text
-            if a.text in texts:
-                raise SessionError(f"anchors[{i}] and anchors[{texts[a.text]}] are QR codes with the same text "
-                                   f"{a.text!r}; every anchor must be unique in view")
-            texts[a.text] = i
+        if a.anchor_kind.detector == "qr":  # a QR anchor is told apart by its text (line ends normalised)
+            key = normal_text(a.text)
+            if key in texts:
+                raise SessionError(f"anchors[{i}] and anchors[{texts[key]}] are QR codes with the same text "
+                                   f"{a.text!r} (line ends and surrounding spaces aside); every anchor must be "
+                                   f"unique in view")
+            texts[key] = i
         for mid in m.markers:
             key = (a.dictionary, mid)
             if key in owner:

@@ -10,6 +10,11 @@ exactly every frame by fitting lines to the edges of the finder squares (edges.p
 appearance (dark ring and centre, light ring between) guards against drift;
 when it fails the code is decoded again.
 
+Texts are compared with their line ends and surrounding whitespace normalised (`same_text`): common
+payloads (vCard, MECARD) are encoded with CRLF line ends, an anchor's `text` is typed with LF ones.
+Texts read that match no anchor are kept (`QRTracking.foreign_texts`) so that a session that tracks
+nothing can say what it read (anchors/diagnose.py).
+
 Module coordinates: u right, v down, (0,0) the symbol's top-left corner and
 (N,N) its bottom-right (N modules, quiet zone excluded). The anchor frame is
 docs/recording-format.md's: x = -L/2 + u L/N, y = L/2 - v L/N.
@@ -24,6 +29,7 @@ import numpy as np
 
 from tracking.anchors.detect import Observation
 from tracking.anchors.edges import refine_squares
+from tracking.anchors.kinds.qr import normal_text, same_text  # noqa: F401 - same_text: the comparison, named here too
 from tracking.anchors.model import AnchorModel, square_corners
 from tracking.anchors.pose import project
 from tracking.camera import Camera
@@ -62,7 +68,8 @@ class QRTracking:
 
     def __init__(self, models: list[AnchorModel], camera: Camera, detector: str = "aruco"):
         self.models = [m for m in models if m.anchor_kind.detector == "qr"]
-        self.by_text = {m.spec.text: m for m in self.models}
+        self.by_text = {normal_text(m.spec.text): m for m in self.models}   # normalised text -> anchor
+        self.foreign_texts: list[str] = []   # texts read (as read) that match no anchor, first seen first
         self.camera = camera
         # The ArUco-based detector finds codes fastest; the classic one decodes some it cannot (perspective,
         # blur) and misses others, so a missing code is searched with both (`detector` says which first).
@@ -229,15 +236,18 @@ class QRTracking:
         if roi is not None:
             x0, y0, x1, y1 = roi
             img = gray[y0:y1, x0:x1]
-        want = {m.spec.text for m in (wanted if wanted is not None else self.models)}
-        codes: dict[str, tuple[np.ndarray, object]] = {}
+        want = {normal_text(m.spec.text) for m in (wanted if wanted is not None else self.models)}
+        codes: dict[str, tuple[np.ndarray, object]] = {}   # normalised text -> (corners, straight symbol)
         self.decoded_texts = []
         for det in self.detectors:
             for text, corners, straight in self._codes(det, img):
                 if text not in self.decoded_texts:
                     self.decoded_texts.append(text)
-                if text not in codes or (codes[text][1] is None and straight is not None):
-                    codes[text] = (corners, straight)
+                key = normal_text(text)
+                if key not in self.by_text and text not in self.foreign_texts:
+                    self.foreign_texts.append(text)
+                if key not in codes or (codes[key][1] is None and straight is not None):
+                    codes[key] = (corners, straight)
             if want <= codes.keys():
                 break
         found = []

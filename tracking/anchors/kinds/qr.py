@@ -9,6 +9,17 @@ import numpy as np
 from tracking.anchors.kinds.base import AnchorKind, mm, square_corners
 
 
+def normal_text(text: str) -> str:
+    """`text` with CRLF / CR line ends as LF and surrounding whitespace removed: the form QR texts are compared
+    in (vCard and MECARD payloads are encoded with CRLF; an anchor's text is typed with LF)."""
+    return text.replace("\r\n", "\n").replace("\r", "\n").strip()
+
+
+def same_text(a: str, b: str) -> bool:
+    """Whether a code's text `a` and an anchor's text `b` are the same (see normal_text)."""
+    return normal_text(a) == normal_text(b)
+
+
 def qr_modules(text: str) -> np.ndarray:
     """(N,N) uint8 image of a QR symbol for `text`, one pixel per module, quiet zone removed (0 black, 255 white)."""
     img = cv2.QRCodeEncoder.create().encode(text)
