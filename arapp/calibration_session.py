@@ -25,6 +25,7 @@ import cv2
 import numpy as np
 
 from tracking.calibration import BoardSpec, CalibrationResult, ViewCollector, solve
+from tracking.calibration_quality import CORNER_FRACTION, CORNERS, missing_corners
 from tracking.default_intrinsics import estimated_camera
 from tracking.errors import CalibrationError
 from tracking.printables import write_sheet
@@ -96,19 +97,29 @@ class SessionResult:
         return self.result.rms
 
 
-def verdict(rms: float, coverage: float, tilt_coverage: float) -> tuple[str, str]:
-    """('good' | 'usable' | 'poor', advice) for a solved calibration."""
+def corners_wanted(missing: list[str]) -> str:
+    """'the top-left and bottom-right corners of the image' for missing corner regions (CORNERS names)."""
+    names = " and ".join(missing) if len(missing) <= 2 else ", ".join(missing[:-1]) + " and " + missing[-1]
+    return f"the {names} corner{'s' if len(missing) > 1 else ''} of the image"
+
+
+def verdict(rms: float, coverage: float, tilt_coverage: float, missing: list[str] | None = None) -> tuple[str, str]:
+    """('good' | 'usable' | 'poor', advice) for a solved calibration; `missing`: image corner regions no
+    view reached (tracking.calibration_quality)."""
+    missing = list(missing or [])
     if rms > USABLE_RMS_PX:
         return "poor", (f"RMS {rms:.2f} px is high: keep the sheet flat, well lit and sharp, check it was "
                         "printed at 100 %, and calibrate again")
-    if rms <= GOOD_RMS_PX and coverage >= GOOD_COVERAGE and tilt_coverage >= 0.6:
+    if rms <= GOOD_RMS_PX and coverage >= GOOD_COVERAGE and tilt_coverage >= 0.6 and not missing:
         return "good", f"RMS {rms:.2f} px over {coverage * 100:.0f} % of the image: a good calibration"
-    missing = []
-    if coverage < GOOD_COVERAGE:
-        missing.append("near the image edges and corners")
+    wanted = []
+    if missing:
+        wanted.append(f"near {corners_wanted(missing)} (the k3 distortion term is held fixed without them)")
+    elif coverage < GOOD_COVERAGE:
+        wanted.append("near the image edges and corners")
     if tilt_coverage < 0.6:
-        missing.append("tilted towards each side")
-    more = f"; for better accuracy add views {' and '.join(missing)}" if missing else ""
+        wanted.append("tilted towards each side")
+    more = f"; for better accuracy add views {' and '.join(wanted)}" if wanted else ""
     return "usable", f"RMS {rms:.2f} px: usable{more}"
 
 
@@ -140,6 +151,15 @@ class CalibrationSession:
     def cells(self) -> np.ndarray:
         """Image coverage grid (rows, cols) of booleans, True where a kept view had a corner."""
         return self.collector.cells
+
+    @property
+    def missing_corners(self) -> list[str]:
+        """The image corner regions (tracking.calibration_quality.CORNERS) no kept view has reached yet;
+        all four are needed before the k3 distortion term is estimated."""
+        c = self.collector
+        if not c.views:
+            return list(CORNERS)
+        return missing_corners([v.img for v in c.views], c.width, c.height)
 
     @property
     def tilt_coverage(self) -> float:
@@ -192,7 +212,7 @@ class CalibrationSession:
         if not c.views:
             raise CalibrationError("no view of the board was kept yet; show the printed board to the camera")
         res = solve(c.views, c.width, c.height, c.coverage, min_views=self.min_views)
-        quality, advice = verdict(res.rms, c.coverage, self.tilt_coverage)
+        quality, advice = verdict(res.rms, c.coverage, self.tilt_coverage, res.missing_corners)
         return SessionResult(res, quality, advice)
 
 
@@ -219,8 +239,9 @@ def collect_from_source(source, session: CalibrationSession, every: int = 1,
 
 
 def draw_feedback(image: np.ndarray, session: CalibrationSession, fb: Feedback | None) -> np.ndarray:
-    """A copy of the frame with the coverage grid shaded green where views reached, and the board
-    corners found in this frame (green when kept, yellow when seen but not kept)."""
+    """A copy of the frame with the coverage grid shaded green where views reached, the image corner
+    regions no view reached yet outlined in orange, and the board corners found in this frame (green
+    when kept, yellow when seen but not kept)."""
     out = image.copy() if image.ndim == 3 else cv2.cvtColor(image, cv2.COLOR_GRAY2BGR)
     h, w = out.shape[:2]
     cells = session.cells
@@ -233,6 +254,12 @@ def draw_feedback(image: np.ndarray, session: CalibrationSession, fb: Feedback |
                 x1, y1 = int((c + 1) * w / cols), int((r + 1) * h / rows)
                 cv2.rectangle(shade, (x0, y0), (x1 - 1, y1 - 1), (0, 160, 0), -1)
     out = cv2.addWeighted(shade, 0.25, out, 0.75, 0)
+    # the image corners no view has reached yet, outlined: the board must be shown there (k3 needs them)
+    cw, ch = int(CORNER_FRACTION * w), int(CORNER_FRACTION * h)
+    boxes = {"top-left": (0, 0), "top-right": (w - cw, 0), "bottom-left": (0, h - ch), "bottom-right": (w - cw, h - ch)}
+    for name in session.missing_corners:
+        x0, y0 = boxes[name]
+        cv2.rectangle(out, (x0 + 2, y0 + 2), (x0 + cw - 3, y0 + ch - 3), (0, 200, 255), 2, cv2.LINE_AA)
     if fb is not None and fb.corners is not None:
         colour = (0, 220, 0) if fb.verdict == "kept" else (0, 220, 255)
         for x, y in np.asarray(fb.corners).reshape(-1, 2):

@@ -41,6 +41,7 @@ from arapp.calibration_session import (
     CalibrationSession,
     SessionResult,
     collect_from_source,
+    corners_wanted,
     describe_board,
     draw_feedback,
     write_board_sheet,
@@ -149,7 +150,9 @@ class CalibrationWizard(QDialog):
         lay = QVBoxLayout(page)
         lay.addWidget(_wrapped("<b>2. Show the board to the camera</b><br>Hold it still at many places: near each "
                                "edge and corner of the picture, close and far, facing the camera and tilted "
-                               "towards each side. Green squares show where views have reached."))
+                               "towards each side. Green squares show where views have reached; the image corners "
+                               "outlined in orange still need a view (the lens's outer distortion is measured "
+                               "there)."))
         self.view = QLabel("Press Start")
         self.view.setAlignment(Qt.AlignmentFlag.AlignCenter)
         self.view.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Ignored)
@@ -236,8 +239,11 @@ class CalibrationWizard(QDialog):
         s = self.session
         tilts = "  ".join(f"{'[x]' if s.tilts[b] else '[ ]'} {b}" for b in TILT_BINS)
         where = f"frame {index + 1} of {total}" if total else f"frame {index + 1}"
+        missing = s.missing_corners
+        wanted = (f"\nStill needed: the board near {corners_wanted(missing)} (outlined in orange)"
+                  if missing else "")
         self.stats.setText(f"{where}: {fb.verdict}.  Views kept {fb.kept} (need {s.min_views}); image covered "
-                           f"{fb.coverage * 100:.0f} %; tilts {tilts}")
+                           f"{fb.coverage * 100:.0f} %; tilts {tilts}{wanted}")
         self.progress.setRange(0, max(s.min_views, fb.kept))
         self.progress.setValue(fb.kept)
         self.solve_button.setEnabled(s.ready)
@@ -324,8 +330,11 @@ class CalibrationWizard(QDialog):
             f"<b>{res.quality.capitalize()}</b>: {res.advice}.<br>"
             f"RMS reprojection error {res.rms:.3f} px over {len(res.result.used)} views "
             f"({len(res.result.dropped)} dropped).<br>"
-            f"Focal length {cam.fx:.1f} x {cam.fy:.1f} px, centre ({cam.cx:.1f}, {cam.cy:.1f}) px, "
-            f"image {cam.width} x {cam.height}.<br>Camera: {self.camera_name}")
+            f"Focal length {cam.fx:.1f} x {cam.fy:.1f} px (+/- {res.result.std.get('fx', 0):.1f}), centre "
+            f"({cam.cx:.1f}, {cam.cy:.1f}) px, image {cam.width} x {cam.height}.<br>"
+            + "".join(f"{line}.<br>" for line in res.result.report().splitlines()
+                      if line.startswith(("projection uncertainty", "k3 held")))
+            + f"Camera: {self.camera_name}")
         self.save_button.setEnabled(True)
 
     def _solve_failed(self, gen: int, exc: BaseException) -> None:
