@@ -5,6 +5,10 @@ HELP = "open the desktop AR app (live view, replay, models, printing)"
 
 def add_arguments(parser):
     parser.add_argument("--source", help="recording folder, video (file:PATH), v4l2:N or depthai[:id] to open")
+    parser.add_argument("--calibration", help="calibration file for --source (a video or V4L2 camera; OpenCV FileStorage "
+                        "or ROS camera_info YAML); the same as SPEC?calibration=FILE")
+    parser.add_argument("--anchors", help="JSON file with the anchors to track (a list as in session.json, e.g. what "
+                        "`arapp markers` wrote); remembered, as Tracking > Anchors does; a recording keeps its own")
     parser.add_argument("--model", help="model to show (NURBS JSON or STL/OBJ/PLY/3MF/GLB)")
     parser.add_argument("--frames", type=int, help="show this many frames, then exit (with --screenshot: save it)")
     parser.add_argument("--screenshot", metavar="OUT.png", help="with --frames: save a picture of the whole window")
@@ -24,6 +28,24 @@ def run(args):
     if frames is not None and frames < 1:
         raise ValueError(f"--frames must be at least 1, got {frames}")
     toolpaths, printer, layer = (getattr(args, k, None) for k in ("toolpaths", "printer", "layer"))
+    source = getattr(args, "source", None)
+    calibration, anchors = getattr(args, "calibration", None), None
+    if calibration:
+        from tracking.calibration_file import read_calibration_file
+        from tracking.sources.registry import format_spec, parse_spec
+
+        if not source:
+            raise ValueError("--calibration goes with --source (the video or camera it calibrates)")
+        read_calibration_file(calibration)  # a bad file: one line now, not a dialog
+        spec = parse_spec(source)
+        if spec.calibration and spec.calibration != calibration:
+            raise ValueError(f"two calibrations: {spec.calibration} in --source and --calibration {calibration}; give one")
+        source = format_spec(spec.scheme, spec.target, calibration)
+    if getattr(args, "anchors", None):
+        from tracking.session import parse_anchors, read_anchor_blocks
+
+        anchors = read_anchor_blocks(args.anchors)
+        parse_anchors(anchors, where=f"{args.anchors}: anchors")  # refused here, in one line
     if (printer is not None or layer is not None) and not toolpaths:
         raise ValueError("--printer and --layer go with --toolpaths GCODE (the G-code to preview on the bed)")
     if layer is not None and layer < 0:
@@ -36,5 +58,5 @@ def run(args):
         from arapp.app.toolpaths import ToolpathBuilder
 
         ToolpathBuilder().profile(printer)  # a missing profile or bed anchor: say so now, not in a dialog
-    return run_gui(source=getattr(args, "source", None), model=getattr(args, "model", None),
-                   frames=frames, screenshot=screenshot, toolpaths=toolpaths, printer=printer, layer=layer)
+    return run_gui(source=source, model=getattr(args, "model", None), frames=frames, screenshot=screenshot,
+                   toolpaths=toolpaths, printer=printer, layer=layer, anchors=anchors)

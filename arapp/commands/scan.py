@@ -16,12 +16,15 @@ EXTRA_MESSAGE = ("arapp scan needs the optional scan engines (scikit-image); ins
 
 
 def add_arguments(parser):
-    parser.add_argument("recording", nargs="?", help="recording folder (arapp-recording/1) circling the object")
+    parser.add_argument("recording", nargs="?", help="recording folder (arapp-recording/1) or plain video (mp4, avi, "
+                        "mov, webm, mkv) circling the object")
     parser.add_argument("--source", help="scan live from a camera instead: v4l2:0, depthai, a video file ...")
-    parser.add_argument("--calibration", help="OpenCV calibration YAML for --source cameras that need one")
-    parser.add_argument("--anchors", help="JSON file with the anchors list (as in session.json) for --source; "
-                        "default: a recording's own, else one aruco DICT_ARUCO_MIP_36h12 id 0 of 0.06 m (what `arapp markers aruco` prints)")
-    parser.add_argument("--seconds", type=float, default=None, help="with --source (required there): capture for S seconds while circling the object")
+    parser.add_argument("--calibration", help="calibration file for a video or a V4L2 camera (OpenCV FileStorage or "
+                        "ROS camera_info YAML); default: the estimated camera (said when used)")
+    parser.add_argument("--anchors", help="JSON file with the anchors list (as in session.json); default: a "
+                        "recording's own, else one aruco DICT_ARUCO_MIP_36h12 id 0 of 0.06 m (what `arapp markers aruco` prints)")
+    parser.add_argument("--seconds", type=float, default=None, help="with a live --source (required there): capture "
+                        "for S seconds while circling the object; with a video: stop after S seconds of it")
     parser.add_argument("-o", "--output", required=True, help="mesh to write: .ply, .stl or .obj")
     parser.add_argument("--print", dest="print_mm", action="store_true",
                         help="write millimetres in the print frame (up = +z, the paper at z = 0) instead of "
@@ -55,17 +58,9 @@ def _progress():
     return show
 
 
-def _anchors_for_source(args):
-    from tracking.recorder import DEFAULT_ANCHORS
-    from tracking.session import parse_anchors, read_anchor_blocks
-
-    if not args.anchors:
-        return parse_anchors(DEFAULT_ANCHORS)
-    return parse_anchors(read_anchor_blocks(args.anchors), where=f"{args.anchors}: anchors")
-
-
 class _TimedSource:
-    """Frames of a live source for `seconds` seconds."""
+    """Frames of a source for `seconds` seconds: of the clock for a live camera, of the frames' own
+    timestamps for a recording or video."""
 
     def __init__(self, src, seconds):
         self.src, self.seconds = src, seconds
@@ -73,8 +68,9 @@ class _TimedSource:
 
     def __iter__(self):
         t0 = time.monotonic()
+        live = getattr(self.src, "live", False)
         for f in self.src:
-            if self.seconds is not None and time.monotonic() - t0 > self.seconds:
+            if self.seconds is not None and (time.monotonic() - t0 if live else f.t) > self.seconds:
                 break
             yield f
 
@@ -99,22 +95,20 @@ def run(args) -> int:
         raise ValueError(f"--max-views must be at least 3, got {args.max_views}")
     options = ScanOptions(max_views=args.max_views, refine=not args.no_refine,
                           voxel=args.voxel_mm / 1000.0 if args.voxel_mm else None, max_frames=args.max_frames)
+    if args.seconds is not None and not 0 < args.seconds <= 86400:
+        raise ValueError(f"--seconds must be above 0 (and at most 86400), got {args.seconds}")
     cancel = threading.Event()
-    if args.recording is not None:
-        from tracking.sources import RecordingSource
+    from arapp.input_source import open_input
 
-        source = RecordingSource(args.recording)
-        anchors = source.session.anchors
-    else:
-        from tracking.sources import open_source
-
-        if args.seconds is None:
-            raise ValueError("--source needs --seconds S: how long to capture while circling the object")
-        live = open_source(args.source, calibration=args.calibration)
-        source = _TimedSource(live, args.seconds)
-        session = getattr(live, "session", None)   # a recording given as --source brings its anchors
-        anchors = _anchors_for_source(args) if args.anchors or session is None else session.anchors
-    camera = source.camera if hasattr(source, "camera") else source.src.camera
+    opened = open_input(args.recording or args.source, calibration=args.calibration, anchors=args.anchors)
+    if opened.source.live and args.seconds is None:
+        opened.close()
+        raise ValueError("--source needs --seconds S: how long to capture while circling the object")
+    for line in opened.notes:
+        print(f"scan: {line}", flush=True)
+    # a recording or video ends by itself; --seconds cuts it (live: by the clock, files: by their time)
+    source = opened.source if args.seconds is None else _TimedSource(opened.source, args.seconds)
+    camera, anchors = opened.camera, opened.anchors
     # SIGTERM stops like Ctrl-C: nothing is written until the mesh is complete (temp file + rename)
     old = signal.signal(signal.SIGTERM, lambda *a: cancel.set())
     try:

@@ -104,11 +104,12 @@ class ScreenshotRun:
 
 def run_gui(source: str | None = None, model: str | None = None, frames: int | None = None,
             screenshot: str | None = None, settings=None, toolpaths: str | None = None, printer: str | None = None,
-            layer: int | None = None) -> int:
+            layer: int | None = None, anchors: list | None = None) -> int:
     """Open the window; with `frames`, run that many frames, save `screenshot` (when given) and return.
 
     toolpaths: a G-code file shown on the printer bed (the print preview), placed by the printer profile
-    `printer` (its bed anchor is the source's first anchor); layer: show layers up to this one (0-based)."""
+    `printer` (its bed anchor is the source's first anchor); layer: show layers up to this one (0-based);
+    anchors: session.json anchor blocks to track from now on (as Tracking > Anchors sets them)."""
     if frames is not None and not source:
         raise ValueError("--frames needs --source (a recording, a video or a camera)")
     ensure_platform()
@@ -117,6 +118,8 @@ def run_gui(source: str | None = None, model: str | None = None, frames: int | N
     if window.engine_kind == "process" and not source:
         warm_up()
     window.show()
+    if anchors is not None:
+        window.session.set_anchors_json(anchors)
     if toolpaths:
         window.set_toolpaths(preview_spec(toolpaths, printer, layer))
     if model:

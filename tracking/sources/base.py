@@ -8,6 +8,7 @@ time from a device: the GUI shows the newest, never paces or seeks) and `seekabl
 
 from __future__ import annotations
 
+import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -105,16 +106,42 @@ class Source:
             pass
 
 
+# FFmpeg's own stderr lines ("moov atom not found") would stand beside the one-line error a file that is
+# no video gets; read once, when OpenCV first loads FFmpeg (OPENCV_FFMPEG_LOGLEVEL set by the user wins).
+os.environ.setdefault("OPENCV_FFMPEG_LOGLEVEL", "-8")
+
+
+def _looks_like_text(path: Path) -> bool:
+    """Whether the file starts as UTF-8 text (a video container starts with binary boxes or headers)."""
+    with open(path, "rb") as f:
+        head = f.read(512)
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError:
+        return False
+    return b"\0" not in head
+
+
 def _open_capture(path: Path) -> cv2.VideoCapture:
     if not path.is_file():
-        raise SourceError(f"{path}: video file does not exist")
+        raise SourceError(f"{path}: {'a folder, not a video' if path.is_dir() else 'video file does not exist'}")
     if path.stat().st_size == 0:
         raise SourceError(f"{path}: video file is empty")
-    cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    if _looks_like_text(path):
+        raise SourceError(f"{path}: a text file, not a video; give a video (mp4, avi, mov, webm, mkv) or a recording "
+                          "folder")
+    log = cv2.utils.logging
+    level = log.getLogLevel()
+    log.setLogLevel(log.LOG_LEVEL_ERROR)  # the backend-fallback warnings: the error below says it all
+    try:
+        cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+        if not cap.isOpened():
+            cap = cv2.VideoCapture(str(path))
+    finally:
+        log.setLogLevel(level)
     if not cap.isOpened():
-        cap = cv2.VideoCapture(str(path))
-    if not cap.isOpened():
-        raise SourceError(f"{path}: OpenCV cannot open this video (corrupt file or unsupported container/codec)")
+        raise SourceError(f"{path}: OpenCV cannot open this video (corrupt file or unsupported container/codec); "
+                          "convert it, e.g. `ffmpeg -i FILE out.mp4`")
     return cap
 
 
