@@ -87,11 +87,11 @@ def away_and_back_keys(away_s: float = 5.0, height: float = 0.42) -> list[dict]:
 
 def render_sequence(scene_json: dict, frames: slice | None = None):
     """Rendered frames as a list of (t, BGR image, true world_from_camera), and the scene."""
-    from tracking.synth.renderer import DeskRenderer
+    from tracking.synth.held import make_renderer
     from tracking.synth.scene import parse_scene
 
     scene = parse_scene(scene_json)
-    r = DeskRenderer(scene)
+    r = make_renderer(scene)
     idx = range(scene.frame_count)
     if frames is not None:
         idx = idx[frames]
@@ -194,3 +194,30 @@ def marker_side(quad, side: int):
     out /= np.linalg.norm(out)
     length = float(np.linalg.norm(b - a))
     return mid, out, (b - a) / length, length, length / 6
+
+
+def held_recording_folder(name: str):
+    """The folder of the held-card recording `name` (tracking.synth.presets.HELD), rendered on first use into
+    build/synth/ (git-ignored) under a name holding a hash of its scene, so a changed preset renders anew."""
+    import hashlib
+    import json
+    from pathlib import Path
+
+    from arapp.exchange.staging import staged_folder
+    from tracking.synth import synthesize
+    from tracking.synth.presets import preset
+    from tracking.synth.scene import parse_scene
+
+    data = preset(name)
+    digest = hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
+    folder = Path(__file__).resolve().parents[1] / "build" / "synth" / f"{name}-{digest}"
+    if not (folder / "groundtruth.tum").is_file():
+        folder.parent.mkdir(parents=True, exist_ok=True)
+        with staged_folder(folder, replace=True) as tmp:   # a half-rendered recording is never left behind
+            synthesize(parse_scene(data, f"preset {name}"), tmp, force=True)
+    return folder
+
+
+def held_recording(name: str, frames: slice | None = None):
+    """`load_recording` of the held-card recording `name` (rendered and cached by `held_recording_folder`)."""
+    return load_recording(held_recording_folder(name), frames)

@@ -34,6 +34,12 @@ corners as constraints); `process` never waits for it. Offline drivers, which
 feed frames faster than a camera would, call `catch_up()` between frames so the
 map keeps the pace it would have live, whatever the machine's load.
 
+Anchors that move in the room (a card held up to a webcam, `anchors_moving`): on keypoint frames the
+background (ORB features off the anchors between two checked frames, and the map's points off them) is
+tested against the anchors' poses (`tracking.slam.anchor_motion`); once it disagrees, the map is dropped
+and no longer built, only flow on points of the anchors' own plane within their outline carries unreadable
+frames, and a frame nothing on the anchors carries is lost.
+
 Anchor measurements that must not move the model: a lone marker whose white
 margin is partly covered (a hand reaching in, `anchors.occlusion`) is not shown
 as it is; the map, else flow, carries the pose, else the anchors' filter with
@@ -56,6 +62,7 @@ from tracking.poses import invert, rotation_angle
 from tracking.session import AnchorSpec
 from tracking.slam.features import FeatureExtractor, Features
 from tracking.anchors.edges import edge_sharpness
+from tracking.slam.anchor_motion import MIN_BACKGROUND, background_rigid, disagrees, on_anchor, outline_region
 from tracking.slam.flow import Tracks, follow, relift, seed_on_plane
 from tracking.slam.fusion import PoseBlender, fuse_pose
 from tracking.slam.map import Map
@@ -63,6 +70,25 @@ from tracking.slam.mapping import KeyframeRequest, LocalMapper
 from tracking.slam.relocalise import relocalise
 from tracking.slam.tracking import (MotionModel, match_by_projection, plausible, pnp_ransac, position_spread,
                                     refine_pose)
+
+# checks in a row on which the background map disagrees with the anchors (`anchor_motion.disagrees`) before
+# the anchors count as moving in the room: one check can meet a flipped lone marker or a map point mismatch
+MOVED_CHECKS = 2
+# pixels: the noise taken for a lone marker's or QR code's corners in its expected error (their residual
+# says nothing: four corners fit a pose to hundredths of a pixel whatever its error)
+MARKER_SIGMA_PX = 0.5
+# the background's two-view test (`anchor_motion.background_rigid`): the share of background matches no indoor
+# depth explains above which a check counts against the anchors (a few mismatches, a hand, are below it);
+# under a fifth, with the anchors' pose turned by MOVED_TURN_DEG or moved MOVED_SHIFT_M since, counts for them
+MOVED_MISS = 0.5
+MOVED_TURN_DEG = 1.5
+MOVED_SHIFT_M = 0.03
+MOVED_SURE = 0.9   # ... and above which, on 3 * MIN_BACKGROUND matches or more, one check is enough
+MOVED_REF_FRAMES = 45   # frames after which the test's earlier frame is too old to compare with
+# the most the flow's camera position on moving anchors may be expected to be off (its spread at 1 px), as a
+# fraction of the camera's distance from its points: a board's ~100 points hold it to ~0.2 %, the few
+# points of a lone marker's bits drift by centimetres within frames (then lost is the honest answer)
+MOVING_FLOW_SPREAD = 0.03
 
 MIN_SIDE = 48  # pixels: smaller frames carry nothing trackable
 MAX_TRACKS = 200  # keypoints followed by optical flow between full frames
@@ -335,6 +361,10 @@ class Tracker:
         self._followed: tuple[int, tuple | None] | None = None   # (frame, `_follow_from_last`'s result there)
         self._anchor_corners: np.ndarray | None = None   # world corners (N,3) the anchors measured last
         self._sharpness: tuple[int, float] | None = None   # (frame, `_start_sharpness` there)
+        self._moving = False   # the anchors were seen to move in the room (`_check_moved`): map off, flow on them
+        self._moved_votes = 0  # background-map checks in a row that disagreed with the anchors
+        self._moved_strong = False   # the last check that disagreed did so beyond doubt (MOVED_SURE)
+        self._moved_ref: tuple | None = None   # (frame, Features, anchors' pose, their outline px) to compare with
 
     def reset(self) -> None:
         """Forget the map and the motion; the next frame starts from the anchors."""
@@ -419,6 +449,8 @@ class Tracker:
             return self._lost_frame(t0, 0)
         if not self.slam:
             return self._marker_only(bgr, t, t0)
+        if self._moving:
+            return self._moving_anchor_frame(gray, t, t0)
 
         young = len(self.map.points) < 60 or len(self.map.keyframes) < 4
         detect = self._since_detect + 1 >= self.marker_every or self._lost > 0 or young or self.motion.last is None
@@ -505,12 +537,151 @@ class Tracker:
             fit = self._from_map(feats, pred, ids, X, D, t)
         if fit is None:
             return self._without_fit(gray, t, t0, got, flow_tried, ar, pred, markers)
+        if self._moving:
+            # the anchors were seen to move on this very frame (`_check_moved`): their pose is shown, the map is gone
+            self._flow = None
+            return self._finish(fit.pose if fit.out_pose is None else fit.out_pose, pred, "marker", "anchors", None,
+                                markers, fit.inliers, t, t0, precise=self._precise(ar))
         self.map.count_matches(fit.visible, fit.point_ids)
         self._maybe_keyframe(t, fit.pose, feats, fit.point_ids, fit.feature_idx, corners_w, corners_uv, fit.state,
                              fit.points, fit.inliers)
         self._start_tracks(gray, feats, fit)
         return self._finish(fit.pose, pred, fit.state, fit.source, fit.out_pose, markers, fit.inliers, t, t0,
                             precise=fit.precise)
+
+    @property
+    def anchors_moving(self) -> bool:
+        """Whether the anchors were seen to move in the room this session (a card held before the camera):
+        the keypoint map is off, and only points on the anchors carry the pose across unreadable frames."""
+        return self._moving
+
+    def _check_moved(self, ar, anchor_pose, corners_w, feats, X, D) -> None:
+        """Compare the anchors' pose this frame with the pose the map's points off the anchors give, fitted
+        from it (`_track_map`); when they disagree beyond both fits' expected errors (`anchor_motion.
+        disagrees`) on `MOVED_CHECKS` checks in a row, the anchors move in the room (a card held up to a
+        webcam): the map, which holds the room, is dropped and no longer built (`_moving`)."""
+        if self._moving or len(feats) < self.min_inliers or ar.covered:
+            return
+        # the pose shown (a lone marker's filtered, a board's as measured): the test needs it steady
+        verdict = (self._background_verdict(self._anchor_output(ar), feats)
+                   if self._lost == 0 and self.motion.steps >= 3 else None)
+        off = ~on_anchor(X, self._anchors.outlines)
+        if verdict is None and off.sum() >= self.min_inliers:
+            p, pi, _, inl = self._track_map(anchor_pose, X[off], D[off], feats)
+            if p is not None:
+                map_spread = position_spread(self.K, p, X[off][pi[inl]], 1.0)
+                spread = self._anchor_spread(ar)
+                if spread is None:
+                    spread = position_spread(self.K, anchor_pose, corners_w, MARKER_SIGMA_PX)
+                verdict = disagrees(anchor_pose, p, spread, map_spread)
+        if verdict is None:
+            return   # the background is not matched here: no verdict either way
+        if not verdict:
+            self._moved_votes = 0
+            return
+        self._moved_votes += 1
+        if self._moved_votes >= MOVED_CHECKS or self._moved_strong:
+            self._moving = True
+            if self.mapper is not None:
+                self.mapper.wait_idle()
+            self.map.clear()
+            self._kf_submissions = []
+            self._flow = None
+
+    def _background_verdict(self, anchor_pose, feats) -> bool | None:
+        """The background's two-view test (`anchor_motion.background_rigid`) between this frame and an earlier
+        checked one: True when most background matches move as no point rigid with the anchors could, False
+        when nearly all do while the anchors' pose changed enough to tell, None when it cannot say yet (the
+        earlier frame is then kept, so the motion adds up)."""
+        region = outline_region(self.camera, anchor_pose, self._anchors.outlines)
+        now = (self._frame, feats, anchor_pose, region)
+        ref = self._moved_ref
+        if ref is None or self._frame - ref[0] > MOVED_REF_FRAMES:
+            self._moved_ref = now
+            return None
+        turned = np.degrees(rotation_angle(ref[2][:3, :3].T @ anchor_pose[:3, :3]))
+        shifted = float(np.linalg.norm(ref[2][:3, 3] - anchor_pose[:3, 3]))
+        if not (turned > MOVED_TURN_DEG or shifted > MOVED_SHIFT_M):
+            return None   # too little motion to tell from the anchors' own noise: the motion adds up
+        n, miss = background_rigid(self.K, ref[1:], now[1:])
+        if n < MIN_BACKGROUND:
+            return None
+        self._moved_ref = now
+        if miss > MOVED_MISS:
+            # nearly the whole background against the anchors, on many matches: no mismatch or hand does that
+            self._moved_strong = miss > MOVED_SURE and n >= 3 * MIN_BACKGROUND
+            return True
+        return False if miss < 0.2 else None
+
+    def _moving_anchor_frame(self, gray, t, t0) -> TrackResult:
+        """A frame once the anchors move in the room (`anchors_moving`): the anchors' pose when they are measured
+        (with the start and smear checks of the still case), else optical flow on points of the anchors
+        themselves (`_follow_on_anchors`), else lost: nothing of the room carries the pose."""
+        ref = self._reference(t)
+        got = None
+        if self._fast_predicted(t):
+            fut = self._pool.submit(self._anchors.process, gray, t, ref)
+            got = self._follow_on_anchors(gray, t)
+            ar = fut.result()
+        else:
+            ar = self._anchors.process(gray, t, ref)
+        self._note_anchors(ar)
+        self._since_detect = 0
+        markers = int(ar.markers)
+        usable = self._anchor_usable(ar)
+        if usable:
+            pose = self._anchor_output(ar)
+            if self._lost > 0 or self.motion.last is None:
+                usable = not (self._too_smeared_to_start(ar, gray) or self._partial_view(ar)
+                              or self._start_uncertain(ar, gray))
+            elif not self._plausible(pose, self.motion.last, t) or self._start_uncertain(ar, gray):
+                # a board smeared at a swing's start reads centimetres off: the points on it, else lost
+                usable = False
+            else:
+                if got is None and self._moving_fast(ar, t):
+                    got = self._follow_on_anchors(gray, t)
+                if got is not None and (self._smeared(ar, got, gray, t) or self._partial_view(ar)
+                                        or self._flow_holds_better(ar, got, t)):
+                    usable = False   # the points on the anchors, followed from the last frame, hold better
+        if usable:
+            self._flow = None if got is None else relift(self.camera, got[1], pose)
+            return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, markers, int(ar.inliers),
+                                t, t0, precise=self._precise(ar))
+        if got is None:
+            got = self._follow_on_anchors(gray, t)
+        if got is not None:
+            return self._flow_result(got, t, t0, markers)
+        return self._lost_frame(t0, markers)
+
+    def _follow_on_anchors(self, gray, t) -> tuple[np.ndarray, Tracks] | None:
+        """`_follow_from_last` for moving anchors: only points on the anchors (their plane, within their
+        outlines: `anchor_motion.on_anchor`) are followed, seeds are found only inside the anchors' outline in
+        the last image; (pose, tracks) or None. Once a frame, like `_follow_from_last`."""
+        if self._followed is not None and self._followed[0] == self._frame:
+            return self._followed[1]
+        got = None
+        if (self.flow and self._lost == 0 and self.motion.velocity is not None and self._prev_gray is not None
+                and self._prev_gray.shape == gray.shape
+                and not (self._via_flow and t - self._flow_start > self.flow_hold_s)):
+            outlines = self._anchors.outlines
+            tracks = None if self._flow is None else self._flow.subset(on_anchor(self._flow.X, outlines))
+            if tracks is None or len(tracks) < FLOW_SEEDS // 2:
+                region = outline_region(self.camera, self.motion.last, outlines)
+                if region is not None:
+                    tracks = seed_on_plane(self.camera, self._prev_gray, self.motion.last, FLOW_SEEDS, keep=tracks,
+                                           later=(self.motion.predict(t), t - self.motion.last_t), region=region)
+            if tracks is not None and len(tracks):
+                got = follow(self.camera, tracks, gray, self.motion.predict(t), self.min_inliers,
+                             dt=t - self.motion.last_t, lifted_from=self.motion.last, before=self.motion.last_step())
+                if got is not None and not self._plausible(got[0], self.motion.last, t):
+                    got = None
+                if got is not None:
+                    X = got[1].X
+                    far = float(np.linalg.norm(got[0][:3, 3] - X.mean(axis=0)))
+                    if not position_spread(self.K, got[0], X, 1.0) <= MOVING_FLOW_SPREAD * far:
+                        got = None   # too few points, too close together, to hold the pose
+        self._followed = (self._frame, got)
+        return got
 
     def _anchors_first(self, gray, t, t0):
         """Anchors were measured last frame: the anchor tracker re-finds them at their predicted place (no
@@ -588,6 +759,8 @@ class Tracker:
         init = anchor_pose
         if pred is not None and self._lost == 0 and not self._plausible(anchor_pose, pred, t):
             init = pred  # a flipped planar solution: let the corners pull from the tracked pose
+        elif len(feats):
+            self._check_moved(ar, anchor_pose, corners_w, feats, X, D)
         pi, fi = self._match(init, X, D, feats, self.radius)
         share = 0.8 if young else self.corner_share   # a young map must not pull the markers
         p, cin, min_, _ = fuse_pose(self.K, init, corners_w, corners_uv, X[pi], feats.und[fi], self.corner_weight,
@@ -971,7 +1144,7 @@ class Tracker:
         return None, None, None, None
 
     def _maybe_keyframe(self, t, pose, feats, inl_ids, inl_feat, corners_w, corners_uv, state, inl_xyz, inliers):
-        if self.mapper is None or len(feats) < 50:
+        if self.mapper is None or len(feats) < 50 or self._moving:
             return
         # scene depth from what we see: matched map points, else the anchors
         pts = inl_xyz if len(inl_xyz) else corners_w

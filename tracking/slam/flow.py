@@ -83,6 +83,12 @@ class Tracks:
     def __len__(self) -> int:
         return int(self.xy.shape[0])
 
+    def subset(self, keep: np.ndarray) -> Tracks:
+        """These tracks, only the rows `keep` (N,) bool."""
+        pick = lambda a: None if a is None else a[keep]  # noqa: E731
+        return Tracks(self.image, np.ascontiguousarray(self.xy[keep]), self.X[keep], pick(self.moved),
+                      pick(self.planar), pick(self.velocity), pick(self.path_velocity))
+
 
 def deskew(camera: Camera, xy: np.ndarray, velocity: np.ndarray | None) -> np.ndarray:
     """Distorted pixels xy (N,2) moved to where they would be at the frame's centre-row time, given
@@ -171,10 +177,12 @@ def lift_to_plane(camera: Camera, world_from_camera: np.ndarray, xy: np.ndarray,
     return X, ok
 
 
-def _corners(gray: np.ndarray, n: int, min_distance: int, taken: np.ndarray) -> np.ndarray:
+def _corners(gray: np.ndarray, n: int, min_distance: int, taken: np.ndarray,
+             region: np.ndarray | None = None) -> np.ndarray:
     """Up to n Shi-Tomasi corners (N,2) float32 full-resolution pixels of `gray`, at least about
-    min_distance pixels from each other and from the pixels `taken` (M,2); on the half-resolution image
-    when the image is wide enough (a quarter of the cost: the corner measure is the whole cost)."""
+    min_distance pixels from each other and from the pixels `taken` (M,2), and inside the polygon `region`
+    (M,2 pixels) when given; on the half-resolution image when the image is wide enough (a quarter of the
+    cost: the corner measure is the whole cost)."""
     half = gray.shape[1] >= HALF_RES_FROM
     img = cv2.pyrDown(gray) if half else gray
     scale = 2.0 if half else 1.0
@@ -186,7 +194,16 @@ def _corners(gray: np.ndarray, n: int, min_distance: int, taken: np.ndarray) -> 
         ij = ij[(ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < img.shape[1]) & (ij[:, 1] < img.shape[0])]
         mask[ij[:, 1], ij[:, 0]] = 255
         mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1)))
-    got = cv2.goodFeaturesToTrack(img, n, SEED_QUALITY, min_distance / scale, mask=255 - mask,
+    allowed = 255 - mask
+    if region is not None:
+        inside = np.zeros(img.shape[:2], np.uint8)
+        poly = np.asarray(region, float).reshape(-1, 2) / scale
+        if np.all(np.isfinite(poly)):
+            cv2.fillConvexPoly(inside, np.rint(poly).astype(np.int32), 255)
+        allowed &= inside
+        if not allowed.any():
+            return np.zeros((0, 2), np.float32)
+    got = cv2.goodFeaturesToTrack(img, n, SEED_QUALITY, min_distance / scale, mask=allowed,
                                   blockSize=3 if half else 5)
     # pyrDown keeps the even rows and columns: half-resolution pixel (x, y) is full pixel (2x, 2y)
     return np.zeros((0, 2), np.float32) if got is None else (scale * got.reshape(-1, 2)).astype(np.float32)
@@ -209,12 +226,13 @@ def _seed_velocity(camera: Camera, new: np.ndarray, keep: Tracks | None, world_f
 
 def seed_on_plane(camera: Camera, gray: np.ndarray, world_from_camera: np.ndarray, n: int = 300,
                   keep: Tracks | None = None, min_distance: int = 10,
-                  later: tuple[np.ndarray, float] | None = None) -> Tracks:
+                  later: tuple[np.ndarray, float] | None = None, region: np.ndarray | None = None) -> Tracks:
     """Tracks for the grey image `gray` taken at `world_from_camera`: the points of `keep` (if any,
     measured in this same image) plus up to n - len(keep) new corners (Shi-Tomasi), away from those,
     placed on the anchors' plane (marked `planar`). With a rolling shutter the new corners are moved to
     the centre row's time first (see `_seed_velocity`; `later` = (the pose dt seconds on, dt)); a velocity
-    only guessed from `later` is not kept (`follow` places such seeds again once it is measured)."""
+    only guessed from `later` is not kept (`follow` places such seeds again once it is measured). `region`
+    (M,2 distorted pixels): new corners only inside this convex polygon (e.g. the anchors' outline)."""
     xy = np.zeros((0, 2), np.float32) if keep is None else keep.xy
     X = np.zeros((0, 3)) if keep is None else keep.X
     planar = np.zeros(0, bool) if keep is None else keep.planar_mask()
@@ -222,7 +240,7 @@ def seed_on_plane(camera: Camera, gray: np.ndarray, world_from_camera: np.ndarra
     path_velocity = None if keep is None else keep.path_velocity
     want = n - xy.shape[0]
     if want > 0:
-        new = _corners(gray, want, min_distance, xy)
+        new = _corners(gray, want, min_distance, xy, region)
         if len(new):
             v = _seed_velocity(camera, new, keep, world_from_camera, later) if camera.readout > 0 else None
             Xn, ok = lift_to_plane(camera, world_from_camera, deskew(camera, new, v))

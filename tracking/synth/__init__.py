@@ -19,10 +19,10 @@ __all__ = ["synthesize", "scene_from_arg"]
 
 def scene_from_arg(arg: str):
     """A Scene from a preset name or a scene JSON file path."""
-    from tracking.synth.presets import EXTRA_TUNING, PRESETS, preset
+    from tracking.synth.presets import EXTRA_TUNING, HELD, PRESETS, preset
     from tracking.synth.scene import load_scene, parse_scene
 
-    if arg in PRESETS or arg in EXTRA_TUNING:
+    if arg in PRESETS or arg in EXTRA_TUNING or arg in HELD:
         return parse_scene(preset(arg), f"preset {arg}")
     if arg.endswith(".json") or Path(arg).exists():
         return load_scene(arg)
@@ -38,9 +38,9 @@ def synthesize(scene, out: str | Path, force: bool = False, max_frames: int | No
     (world_from_camera of every frame, OpenCV camera axes).
     """
     from tracking.recorder import RecordingWriter
-    from tracking.synth.renderer import DeskRenderer
+    from tracking.synth.held import make_renderer
 
-    renderer = DeskRenderer(scene)
+    renderer = make_renderer(scene)
     n = scene.frame_count if max_frames is None else min(max_frames, scene.frame_count)
     source = {"kind": "synthetic", "generator": "arapp synth", "scene": json.loads(json.dumps(scene.to_dict()))}
     # the camera that "recorded" it states its rolling-shutter readout, as a calibration that measured it would

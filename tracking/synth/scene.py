@@ -16,7 +16,9 @@ Scene JSON (all keys but `anchors` and `trajectory` optional; metres, seconds, d
                  "white_balance": {"amplitude": 0.04, "period": 3.0}, "sensor": {"full_well": 3000, "read_noise": 1.5},
                  "chroma_422": true},
      "video": {"fourcc": "MJPG", "quality": 90},
-     "supersample": 3}
+     "supersample": 3,
+     "held": {...}}                                  (optional: a card held before the camera, see
+                                                     tracking.synth.held)
 
 The desk is the world anchor's paper plane (world z = 0); the camera sees it
 from the out-of-paper side. Desk coordinates: x = world x; y "away" and z up
@@ -80,6 +82,8 @@ class Scene:
     fourcc: str = "MJPG"
     quality: int = 90
     supersample: int = 3
+    held: dict | None = None
+    """a card held before the camera (tracking.synth.held): the desk is the card, moving in a room"""
 
     @property
     def frame_count(self) -> int:
@@ -116,6 +120,7 @@ class Scene:
                      "style": self.desk_style},
             "trajectory": self.trajectory, "effects": self.effects,
             "video": {"fourcc": self.fourcc, "quality": self.quality}, "supersample": self.supersample,
+            **({"held": self.held} if self.held else {}),
         }
 
 
@@ -147,7 +152,7 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
     if not isinstance(data, dict):
         raise SessionError(f"{where}: must be a JSON object")
     known = {"name", "seed", "fps", "duration", "camera", "anchors", "desk", "trajectory", "effects", "video",
-             "supersample"}
+             "supersample", "held"}
     for k in data:
         if k not in known:
             raise SessionError(f"{where}.{k}: unknown key (known: {', '.join(sorted(known))})")
@@ -198,8 +203,12 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
         desk_size=(float(size[0]), float(size[1])), desk_ppm=float(desk.get("ppm", 2000.0)),
         desk_seed=int(desk.get("seed", data.get("seed", 0))), desk_style=style,
         effects=effects, fourcc=str(video.get("fourcc", "MJPG")), quality=int(video.get("quality", 90)),
-        supersample=ss,
+        supersample=ss, held=data.get("held"),
     )
+    if scene.held is not None:
+        from tracking.synth.held import check_held
+
+        check_held(scene.held, effects.get("rolling_shutter"), f"{where}.held")
 
     make_trajectory(scene.trajectory, scene.duration, scene.seed, f"{where}.trajectory")  # validate now
     return scene

@@ -1,0 +1,131 @@
+"""A card held before a camera (issue 25 part 2): the anchors move in the room, so the room's keypoints must
+not carry the model.
+
+Recordings: tracking.synth.presets.HELD, rendered on first use and cached in build/synth/ (tests/scenes.py
+`held_recording`): a board or marker card waved before a still webcam (slow drifts a few cm/s and two fast
+swings smeared past reading), a textured wall 0.8 m behind it; and one where a hand-held camera moves too.
+Ground truth: the camera in the card's anchor frame, per frame, from the generator (an oracle independent of
+the tracker). The peer: plain OpenCV (detectMarkers + solvePnP, benchmarks/peers.py) on the same frames.
+The tuning recordings (tune_held_*) are the ones the rules were chosen on; test_held_* are only measured.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenes import held_recording, run_tracker
+from tracking.synth.presets import HELD, HELD_TEST, HELD_TUNING, PRESETS
+from tracking.tracker import Tracker
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+MAX_ERR_M = 0.03   # the issue's goal: no frame placed more than 3 cm off
+
+
+def _plain_errors(frames, session) -> np.ndarray:
+    """Plain OpenCV's camera-position error (m) per frame, NaN where it finds nothing."""
+    from peers import PlainPeer
+
+    peer = PlainPeer(session.anchors, session.camera)
+    out = []
+    for _, img, gt in frames:
+        p = peer.pose(img)
+        out.append(np.nan if p is None else float(np.linalg.norm(p[:3, 3] - gt[:3, 3])))
+    return np.array(out)
+
+
+_RUNS: dict = {}
+
+
+def _run(name: str) -> dict:
+    """arapp's tracker and the plain peer on one held recording (once per test session)."""
+    if name not in _RUNS:
+        frames, session = held_recording(name)
+        with Tracker(session.camera, session.anchors) as tr:
+            r = run_tracker(tr, frames)
+            r["moving"] = tr.anchors_moving
+        r["plain"] = _plain_errors(frames, session)
+        gt = np.array([f[2] for f in frames])
+        # how far the card moves in the camera's view (the truth's camera position in the card's frame)
+        r["travel"] = float(np.linalg.norm(gt[:, :3, 3] - gt[0, :3, 3], axis=1).max())
+        _RUNS[name] = r
+    return _RUNS[name]
+
+
+def test_held_presets_are_apart_from_the_rest():
+    """Test and tuning held cards share no seed with each other or with any bundled recording."""
+    def seeds(names):
+        return {HELD[n]["seed"] for n in names} | {HELD[n]["desk"]["seed"] for n in names} | \
+               {HELD[n]["held"]["wall"]["seed"] for n in names}
+
+    assert HELD_TEST and HELD_TUNING and not set(HELD) & set(PRESETS)
+    assert not seeds(HELD_TEST) & seeds(HELD_TUNING)
+    assert not seeds(HELD) & ({p["seed"] for p in PRESETS.values()} | {p["desk"]["seed"] for p in PRESETS.values()})
+
+
+def test_held_card_ground_truth_is_the_card_frame():
+    """The generator's truth is the camera in the moving card's frame: the card's corners drawn from it with
+    cv2.projectPoints land on the markers OpenCV detects in the image (sharp frames), and with the
+    camera still the truth moves as the card does."""
+    import cv2
+
+    from tracking.anchors.model import build_models
+    from tracking.poses import invert
+
+    frames, session = held_recording("tune_held_board", slice(0, 40))
+    model = build_models(session.anchors)[0]
+    det = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
+    gaps = []
+    for _, img, gt in frames[::6]:
+        corners, ids, _ = det.detectMarkers(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY))
+        cfw = invert(gt)
+        rvec, _ = cv2.Rodrigues(cfw[:3, :3])
+        for c, i in zip(corners, ids.ravel()):
+            obj = model.to_world(model.markers[int(i)])
+            px, _ = cv2.projectPoints(obj, rvec, cfw[:3, 3], session.camera.K, session.camera.dist)
+            gaps.append(np.linalg.norm(px.reshape(4, 2) - c.reshape(4, 2), axis=1).max())
+    assert len(gaps) >= 40 and float(np.median(gaps)) < 0.5 and float(np.max(gaps)) < 1.5, np.percentile(gaps, [50, 100])
+    assert _run("tune_held_board")["travel"] > 0.1   # the card really moves: 10 cm and more before the camera
+
+
+@pytest.mark.parametrize("name", [n for n in HELD if "board" in n or "both" in n])
+def test_held_board_card_is_followed(name):
+    """A board card held and waved before the camera: arapp notices it moves in the room, places at least as
+    many frames as plain OpenCV, none more than 3 cm off (plain places its smeared detections 5-17 cm off)."""
+    r = _run(name)
+    e, plain = r["errors"], r["plain"]
+    assert r["moving"], "the card moved in the room but the tracker did not notice"
+    placed, plain_placed = int(np.isfinite(e).sum()), int(np.isfinite(plain).sum())
+    assert placed >= plain_placed, (placed, plain_placed)
+    assert float(np.nanmax(e)) <= MAX_ERR_M, (float(np.nanmax(e)), int(np.nanargmax(e)))
+    # lost when nothing carries it, never placed from the still room: every placed frame is on the card
+    assert all(s in ("marker", "slam") for s, p in zip(r["states"], r["poses"]) if p is not None)
+
+
+@pytest.mark.parametrize("name", [n for n in HELD if "marker" in n])
+def test_held_marker_card_is_no_worse_than_plain(name):
+    """A lone 6 cm marker card: its four corners hold the camera position to only 1-3 cm at 0.42 m (the
+    plain peer's own median), so the goal here is the peer's: as many frames placed, and the worst frame
+    no further off than the peer's worst; the few points on a lone marker do not carry it across a swing."""
+    r = _run(name)
+    e, plain = r["errors"], r["plain"]
+    assert r["moving"]
+    assert int(np.isfinite(e).sum()) >= int(np.isfinite(plain).sum())
+    assert float(np.nanmax(e)) <= float(np.nanmax(plain)), (float(np.nanmax(e)), float(np.nanmax(plain)))
+
+
+def test_still_card_is_not_taken_for_a_moving_one():
+    """A card lying still on a desk, the camera moving (the bundled tuning orbit over a board): the room is
+    rigid with the anchors and the map keeps carrying."""
+    from scenes import bundled_recording
+
+    frames, session = bundled_recording("board_orbit")
+    with Tracker(session.camera, session.anchors) as tr:
+        for t, img, _ in frames:
+            tr.process(img, t)
+            tr.catch_up()
+        assert not tr.anchors_moving
