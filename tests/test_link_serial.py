@@ -317,6 +317,7 @@ def test_cancel_during_heat_wait_sends_m108_then_cools():
     # M108 (break the wait; Marlin's emergency parser acts on it at once) right after the wait.
     i = executed.index("M190 S28")
     assert executed[i + 1] == "M108"
-    assert executed[i + 2 : i + 5] == ["M104 S0", "M140 S0", "M107"]
+    # (A poke, M105, may come between when the wait outlasts the progress window: it changes nothing.)
+    assert [c for c in executed[i + 2:] if c != "M105"][:3] == ["M104 S0", "M140 S0", "M107"]
     assert not any(c.startswith("G1 X") for c in executed)  # nothing of the part was printed
     assert bed == 0

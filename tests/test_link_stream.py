@@ -154,31 +154,40 @@ def test_stale_copies_absorb_their_own_replies():
     assert s.frames_to_send(0.3) == [framed(1, "G1 X1"), framed(2, "G1 X2"), framed(3, "G1 X3")]
 
 
-def test_only_answers_reset_the_timer_for_a_plain_line():
+def test_temperature_lines_are_life_not_progress_busy_is_both():
+    """Liveness and progress are separate: a temperature report restarts neither the window nor
+    (alone) the stop; `busy:` restarts the window for any line (Marlin sends it for a slow move too)."""
+    temp = P.parse_reply("T:25.0 /0.0 B:25.0 /0.0 @:0 B@:0")
     s = stream(timeout=2.0)
     s.start(program_items(["G1 X1"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
-    temp = P.parse_reply("T:25.0 /0.0 B:25.0 /0.0 @:0 B@:0")
-    busy = P.parse_reply("echo:busy: processing")
     for t in (0.5, 1.0, 1.5, 1.9):
+        s.on_line(t)
         s.on_keepalive(temp, t)
-        s.on_keepalive(busy, t)
-    assert s.deadline() == pytest.approx(2.0)
+    assert s.deadline() == pytest.approx(2.0) and s.last_byte == 1.9
     assert s.on_timeout(1.9) is Step.WAITING
-    assert s.on_timeout(2.0) is Step.REWOUND and s.timeouts == 1
+    assert s.on_timeout(2.0) is Step.POKE and s.timeouts == 1
+    b = stream(timeout=2.0)
+    b.start(program_items(["G1 X1"]), JobState(), now=0.0)
+    b.frames_to_send(0.0)
+    for t in (0.5, 1.0, 1.5, 1.9):
+        b.on_line(t)
+        b.on_keepalive(P.parse_reply("busy: processing"), t)
+    assert b.deadline() == pytest.approx(3.9) and b.keepalive_seen
 
 
-def test_busy_keeps_a_blocking_command_alive():
+def test_busy_keeps_a_command_alive_without_pokes():
     s = stream(timeout=2.0, blocking_timeout=100.0)
-    s.start(program_items(["G29"]), JobState(), now=0.0)
+    s.start(program_items(["M600"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
-    assert s.deadline() == pytest.approx(100.0)  # silent so far: a silent firmware gets minutes
-    busy = P.parse_reply("echo:busy: processing")
-    for t in range(1, 300):
-        s.on_keepalive(busy, float(t))
+    assert s.deadline() == pytest.approx(2.0)  # the window runs from the line
+    for t in range(1, 300):  # Marlin's host keep-alive while it waits for the user, every second
+        s.on_line(float(t))
+        s.on_keepalive(P.parse_reply("echo:busy: paused for user"), float(t))
         assert s.on_timeout(float(t) + 0.5) is Step.WAITING
-    assert s.deadline() == pytest.approx(301.0)  # alive printer: timeout after the last keep-alive
-    assert s.on_timeout(301.0) is Step.REWOUND
+    assert s.pokes == 0 and s.timeouts == 0
+    assert s.deadline() == pytest.approx(301.0)  # the keep-alives stop: a poke after one window
+    assert s.on_timeout(301.0) is Step.POKE
 
 
 def test_heat_wait_temperatures_extend_only_until_the_target():
@@ -197,31 +206,40 @@ def test_temperatures_do_not_extend_a_non_heating_blocking_command():
     s = stream(timeout=2.0, blocking_timeout=100.0)
     s.start(program_items(["G28"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
-    s.on_keepalive(P.parse_reply("T:150.0 /210.0 B:25.0 /0.0"), 50.0)
-    assert s.deadline() == pytest.approx(100.0)
+    s.on_keepalive(P.parse_reply("T:150.0 /210.0 B:25.0 /0.0"), 1.0)
+    assert s.deadline() == pytest.approx(2.0)
 
 
-def test_too_many_timeouts_stop():
+def test_silence_for_the_liveness_limit_stops():
     s = stream(timeout=1.0, max_timeouts=2)
     s.start(program_items(["G1 X1"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
-    assert s.on_timeout(1.0) is Step.REWOUND
-    s.frames_to_send(1.0)
-    assert s.on_timeout(2.0) is Step.REWOUND
-    s.frames_to_send(2.0)
-    out = s.on_timeout(3.0)
+    assert s.on_timeout(1.0) is Step.POKE
+    assert s.frames_to_send(1.0) == [framed(2, "M105")]  # the poke: the next number, never line 1 again
+    out = s.on_timeout(2.0)
     assert isinstance(out, Stop) and out.reason is StopReason.NO_ANSWER
+    assert out.message == "the printer stopped answering (nothing at all received for 2.0 s; the limit is 2 s)"
 
 
-def test_an_answer_resets_the_timeout_count():
-    s = stream(timeout=1.0, max_timeouts=1)
+def test_any_line_keeps_the_printer_alive_but_not_for_ever():
+    """Temperature lines in every window: no "stopped answering"; but with no progress for the same
+    limit the stream still stops (it never waits for ever)."""
+    s = stream(timeout=1.0, max_timeouts=3, rx_buffer=1000)
     s.start(program_items(["G1 X1", "G1 X2"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
-    assert s.on_timeout(1.0) is Step.REWOUND
-    s.frames_to_send(1.0)
-    s.on_ok(1.5)
-    s.frames_to_send(1.5)
-    assert s.on_timeout(2.5) is Step.REWOUND  # a new first timeout, not the second
+    for t in (1.0, 2.0):
+        s.on_line(t - 0.5)
+        assert s.on_timeout(t) is Step.POKE
+        s.frames_to_send(t)
+    s.on_line(2.5)
+    out = s.on_timeout(3.0)
+    assert isinstance(out, Stop) and "still talks but has acknowledged no line for 3.0 s" in out.message
+    s2 = stream(timeout=1.0, max_timeouts=1)
+    s2.start(program_items(["G1 X1", "G1 X2"]), JobState(), now=0.0)
+    s2.frames_to_send(0.0)
+    s2.on_ok(0.9)
+    s2.frames_to_send(0.9)
+    assert s2.on_timeout(1.9) is Step.POKE  # an answer restarted both timers
 
 
 def test_recoverable_error_shortens_the_wait_for_its_resend():
@@ -232,12 +250,13 @@ def test_recoverable_error_shortens_the_wait_for_its_resend():
     assert s.deadline() == pytest.approx(4.0)
 
 
-def test_wait_with_an_old_unanswered_line_rewinds():
+def test_wait_with_an_old_unanswered_line_pokes():
     s = stream(timeout=10.0)
     s.start(program_items(["G1 X1"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
     assert s.on_wait(0.1) is Step.NOTHING  # just sent
-    assert s.on_wait(0.5) is Step.REWOUND and s.next_number == 1
+    assert s.on_wait(0.5) is Step.POKE and s.next_number == 2
+    assert s.frames_to_send(0.5) == [framed(2, "M105")]
 
 
 def test_actions():
@@ -345,7 +364,11 @@ def test_paused_stream_still_resends_up_to_the_top_line():
     s.start(program_items(["G1 X1", "G1 X2", "G1 X3"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
     s.paused = True
-    assert s.on_timeout(10.0) is Step.REWOUND
+    assert s.on_resend(1, 10.0) is Step.REWOUND
+    s.on_ok(10.0)
+    s.on_error(10.0)
+    assert s.on_resend(1, 10.0) is Step.IGNORED  # line 2's stale copy
+    s.on_ok(10.0)
     assert s.frames_to_send(10.0) == [framed(1, "G1 X1"), framed(2, "G1 X2")]
     assert s.frames_to_send(10.0) == []
 
@@ -394,13 +417,23 @@ def test_two_rewinds_make_both_older_epochs_stale():
     s = stream(window=3, rx_buffer=1000)
     s.start(program_items(["G1 X1", "G1 X2", "G1 X3"]), JobState(), now=0.0)
     s.frames_to_send(0.0)  # 1, 2, 3 (epoch 0)
-    s.on_timeout(20.0)  # epoch 1: nothing in flight
-    s.frames_to_send(20.0)  # 1, 2, 3 again (epoch 1)
-    assert s.on_resend(1, 20.1) is Step.REWOUND  # epoch 2
+    assert s.on_resend(1, 0.1) is Step.REWOUND  # epoch 1
+    s.on_ok(0.1)
+    s.frames_to_send(0.1)  # 1 again (window: 2 stale copies + 1)
+    s.on_error(0.2)
+    assert s.on_resend(1, 0.2) is Step.IGNORED  # copy 2 of epoch 0
+    s.on_ok(0.2)
+    s.frames_to_send(0.2)  # 2 (epoch 1)
+    s.on_error(0.25)
+    assert s.on_resend(1, 0.25) is Step.IGNORED  # copy 3 of epoch 0
+    s.on_ok(0.25)
+    s.on_error(0.3)
+    assert s.on_resend(1, 0.3) is Step.REWOUND  # copy 1 of epoch 1 refused: a new request, epoch 2
     assert s.epoch == 2
-    s.on_ok(20.1)
-    assert [c.epoch for c in s.inflight] == [1, 1]
-    assert s.on_resend(1, 20.2) is Step.IGNORED  # a stale copy's request
+    s.on_ok(0.3)
+    assert [c.epoch for c in s.inflight] == [1]
+    s.on_error(0.4)
+    assert s.on_resend(1, 0.4) is Step.IGNORED  # a stale copy's request
 
 
 def test_a_stale_copy_asked_for_twice_absorbs_the_second_ok():
@@ -443,22 +476,25 @@ def test_wait_counts_as_a_timeout_only_for_an_old_line():
     s.start(program_items(["G1 X1"]), JobState(), now=0.0)
     s.frames_to_send(10.0)
     assert s.on_wait(10.1) is Step.NOTHING and s.timeouts == 0
-    assert s.on_wait(10.5) is Step.REWOUND and s.timeouts == 1
+    assert s.on_wait(10.5) is Step.POKE and s.timeouts == 1
     s.frames_to_send(10.5)
-    assert s.on_wait(11.0) is Step.REWOUND and s.timeouts == 2
+    assert s.on_wait(10.6) is Step.NOTHING  # the poke has just gone out
+    assert s.on_wait(11.0) is Step.POKE and s.timeouts == 2
 
 
 def test_keepalive_resets_the_timeout_count_and_marks_the_printer():
     s = stream(timeout=1.0, max_timeouts=1, blocking_timeout=100.0)
     s.start(program_items(["G28", "G29"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
-    assert s.on_timeout(100.0) is Step.REWOUND and s.consecutive_timeouts == 1
-    s.frames_to_send(100.0)
-    s.on_keepalive(P.parse_reply("busy: processing"), 100.5)
+    assert s.give_up_after() == 100.0  # a silent blocking command: minutes
+    assert s.on_timeout(1.0) is Step.POKE and s.consecutive_timeouts == 1
+    s.frames_to_send(1.0)
+    s.on_keepalive(P.parse_reply("busy: processing"), 1.5)
     assert s.consecutive_timeouts == 0 and s.keepalive_seen
-    s.on_ok(101.0)
-    s.frames_to_send(101.0)  # G29: the printer sends keep-alives, silence is a lost answer after the timeout
-    assert s.deadline() == pytest.approx(102.0)
+    s.on_ok(2.0)
+    s.frames_to_send(2.0)
+    # G29 on a printer that sends keep-alives: its silence counts like any other.
+    assert s.give_up_after() == 1.0 and s.deadline() == pytest.approx(3.0)
 
 
 def test_heat_wait_keepalive_resets_the_timeout_count():
@@ -483,22 +519,25 @@ def test_heat_wait_reading(command, reply, alive):
     s.start(program_items([command]), JobState(), now=0.0)
     s.frames_to_send(0.0)
     s.on_keepalive(P.parse_reply(reply), 50.0)
-    assert s.deadline() == pytest.approx(51.0 if alive else 100.0)
+    assert s.deadline() == pytest.approx(51.0 if alive else 1.0)
 
 
-def test_timeout_counters_and_message():
-    s = stream(timeout=1.5, max_timeouts=2)
+def test_error_without_resend_is_the_whole_answer_then_a_poke():
+    """The VirtualPrinter's missing-line-number fault: `Error:` and nothing else. After the short error
+    wait the copy counts as answered (not confirmed) and a poke goes out; the firmware's refusal of the
+    poke asks for the line, which then goes out again."""
+    s = stream(timeout=1.5, rx_buffer=1000)
     s.start(program_items(["G1 X1"]), JobState(), now=0.0)
     s.frames_to_send(0.0)
     s.on_error(0.5)
-    assert s.on_timeout(1.5) is Step.REWOUND  # the error's 1 s wait
-    assert s.error_seen_at is None and s.deadline() is None
-    s.frames_to_send(1.5)
-    assert s.deadline() == pytest.approx(3.0)
-    s.on_timeout(3.0)
-    s.frames_to_send(3.0)
-    out = s.on_timeout(4.5)
-    assert s.timeouts == 3 and out.message == "the printer stopped answering (no reply for 1.5 s, 2 times)"
+    assert s.deadline() == pytest.approx(1.5)
+    assert s.on_timeout(1.5) is Step.POKE and s.error_seen_at is None and not s.inflight
+    assert s.frames_to_send(1.5) == [framed(2, "M105")]
+    s.on_error(1.6)
+    assert s.on_resend(1, 1.6) is Step.REWOUND
+    s.on_ok(1.6)
+    assert s.frames_to_send(1.6) == [framed(1, "G1 X1")]
+    assert s.timeouts == 1 and s.confirmed == 0
 
 
 def test_action_and_start_messages():
@@ -537,9 +576,14 @@ def test_m108_while_resending_goes_out_in_order():
     s = stream(window=2, rx_buffer=1000)
     s.start(program_items(["M190 S60", "G1 X1"]), JobState(), now=0.0)
     s.frames_to_send(0.0)  # 1, 2
-    s.on_timeout(1000.0)  # rewind to 1
+    s.on_resend(1, 0.5)  # rewind to 1
+    s.on_ok(0.5)
     s.window = 1
-    assert s.frames_to_send(1000.0) == [framed(1, "M190 S60")]  # line 2 is still to be resent
+    assert s.frames_to_send(0.5) == []  # line 2's copy (refused in its turn) still fills the window
+    s.on_error(0.6)
+    s.on_resend(1, 0.6)
+    s.on_ok(0.6)
+    assert s.frames_to_send(0.6) == [framed(1, "M190 S60")]  # line 2 is still to be resent
     assert s.cancel(bed_height=None, emergency_parser=True, now=1000.1) == []
     assert s.items[0].text == "M108" and s.top == 2
 
@@ -550,10 +594,15 @@ def test_m108_is_kept_for_a_resend():
     s.frames_to_send(0.0)
     assert s.cancel(bed_height=None, emergency_parser=True, now=0.1) == [framed(2, "M108")]
     assert s.top == 2 and len(s.inflight) == 2 and s.inflight[1].sent_at == 0.1
-    s.on_timeout(100.0 + 600.0)
-    assert s.frames_to_send(700.0) == [framed(1, "M109 S200")]
-    s.on_ok(700.1)
-    assert s.frames_to_send(700.1) == [framed(2, "M108")]
+    s.on_error(0.2)
+    s.on_resend(1, 0.2)
+    s.on_ok(0.2)
+    s.on_error(0.3)
+    assert s.on_resend(1, 0.3) is Step.IGNORED  # the M108 copy, refused by number
+    s.on_ok(0.3)
+    assert s.frames_to_send(0.3) == [framed(1, "M109 S200")]
+    s.on_ok(0.4)
+    assert s.frames_to_send(0.4) == [framed(2, "M108")]
 
 
 def test_finish_keeps_the_stop_and_clears_old_messages():
@@ -579,7 +628,9 @@ def test_poll_frames_while_paused_and_their_resend():
     assert s.poll_frame(2.0) is None  # 0.5 s after the last poll
     assert s.poll_frame(2.5) == framed(2, "M105")
     assert s.top == 2 and s.history[2][1].text == "M105"
-    s.on_timeout(20.0)
+    s.on_error(20.0)
+    s.on_resend(2, 20.0)
+    s.on_ok(20.0)
     assert s.frames_to_send(20.0) == [framed(2, "M105")]  # resent while paused
     s2 = stream(window=1, poll_interval=0.0)
     s2.start([], JobState(), now=0.0)
@@ -598,3 +649,90 @@ def test_ok_for_an_already_confirmed_copy_is_ignored():
 
 def test_code_of_takes_the_first_word():
     assert code_of("G28 X Y") == "G28" and code_of("  m400  ") == "M400"
+
+
+# -- issue #27: a busy printer, pokes, duplicate requests ------------------------------------------
+def test_a_busy_printer_gets_pokes_never_its_line_again():
+    """Line 1 keeps the firmware busy for 3.5 windows: each window without progress sends a numbered
+    M105 on the next free number (while the buffer has room), never line 1; the answers, in order,
+    confirm everything and the job goes on with line 4."""
+    s = stream(window=1, timeout=1.0, rx_buffer=1000)
+    s.start(program_items(["G1 X1", "G1 X2"]), JobState(), now=0.0)
+    assert s.frames_to_send(0.0) == [framed(1, "G1 X1")]
+    sent = []
+    for t in (1.0, 2.0, 3.0):
+        assert s.on_timeout(t) is Step.POKE
+        sent += s.frames_to_send(t)
+    assert sent == [framed(2, "M105"), framed(3, "M105"), framed(4, "M105")]
+    s.on_ok(3.5)  # line 1 done
+    assert s.confirmed == 1 and s.frames_to_send(3.5) == []  # three pokes still in flight
+    for _ in range(3):
+        s.on_ok(3.6, temperatures=True)
+    assert s.confirmed == 4 and s.frames_to_send(3.6) == [framed(5, "G1 X2")]
+    assert s.state.commands_done == 1
+
+
+def test_pokes_stop_at_the_receive_buffer():
+    line = framed(1, "G1 X1")
+    s = stream(window=1, timeout=1.0, rx_buffer=len(line) + len(framed(2, "M105")))
+    s.start(program_items(["G1 X1"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    s.on_timeout(1.0)
+    assert s.frames_to_send(1.0) == [framed(2, "M105")]
+    assert s.on_timeout(2.0) is Step.POKE
+    assert s.frames_to_send(2.0) == [] and s.pokes == 1 and s.timeouts == 2  # it would overflow
+
+
+def test_a_lost_ok_is_found_by_the_pokes_answer():
+    """Line 2's ok is lost; the poke's `ok T:` (Marlin answers M105 so, other lines with a bare ok)
+    accounts for line 2: Marlin took the poke's number only after line 2."""
+    s = stream(window=1, timeout=1.0)
+    s.start(program_items(["G1 X1", "G1 X2", "G1 X3"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    assert s.on_ok(0.1) is Step.CONFIRMED  # a bare ok: this firmware's usual answer
+    s.frames_to_send(0.1)  # line 2; its ok never comes
+    assert s.on_timeout(1.1) is Step.POKE
+    assert s.frames_to_send(1.1) == [framed(3, "M105")]
+    assert s.on_ok(1.2, temperatures=True) is Step.CONFIRMED
+    assert s.confirmed == 3 and not s.inflight and s.state.commands_done == 2
+    assert s.frames_to_send(1.2) == [framed(4, "G1 X3")]
+
+
+def test_ok_with_temperatures_is_plain_on_a_firmware_that_always_sends_them():
+    s = stream(window=1, timeout=1.0)
+    s.start(program_items(["G1 X1", "G1 X2"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    s.on_timeout(1.0)
+    s.frames_to_send(1.0)  # poke 2 behind line 1
+    assert s.on_ok(1.1, temperatures=True) is Step.CONFIRMED  # no bare ok seen yet: it answers line 1
+    assert s.confirmed == 1 and len(s.inflight) == 1
+
+
+def test_a_request_for_a_line_already_being_resent_is_ignored():
+    """During a resend a poke goes out on top + 1, ahead of lines still to be resent. The firmware,
+    busy, then takes the resent line, refuses the poke by number and asks for the next line, which
+    is already on its way behind the poke: that request is ignored (no second copy of it)."""
+    s = stream(window=2, timeout=1.0, rx_buffer=1000)
+    s.start(program_items(["G1 X1", "G1 X2", "G1 X3"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)  # 1, 2
+    s.on_ok(0.1)  # 1 ran
+    s.frames_to_send(0.1)  # 3
+    s.on_error(0.2)
+    assert s.on_resend(2, 0.2) is Step.REWOUND  # line 2 damaged
+    s.on_ok(0.2)
+    assert s.frames_to_send(0.2) == [framed(2, "G1 X2")]  # window: stale 3 + resent 2
+    # The firmware is busy; a window passes: the poke goes on top + 1 = 4, line 3 still to be resent.
+    assert s.on_timeout(1.2) is Step.POKE
+    assert s.frames_to_send(1.2) == [framed(4, "M105")]
+    s.on_error(2.0)
+    assert s.on_resend(2, 2.0) is Step.IGNORED  # stale 3 refused (an older rewind)
+    s.on_ok(2.0)
+    s.on_ok(2.1)  # the resent 2 ran
+    assert s.confirmed == 2
+    assert s.frames_to_send(2.1) == [framed(3, "G1 X3")]  # behind the poke
+    s.on_error(2.2)
+    assert s.on_resend(3, 2.2) is Step.IGNORED  # the poke refused; 3 is on its way
+    s.on_ok(2.2)
+    assert s.on_ok(2.3) is Step.CONFIRMED and s.confirmed == 3  # 3 ran, once
+    assert s.frames_to_send(2.3) == [framed(4, "M105")]  # the poke's number, in its turn
+    assert s.epoch == 1

@@ -29,6 +29,15 @@ VirtualPrinter's parser would crash on the minus sign).
 `corrupt_every=n` is line noise on the wire: the bridge changes one byte of
 every n-th numbered host line, which the printer finds by its checksum.
 
+`busy={line_number: seconds}` makes the printer busy after it has run the
+host's line with that number (the first copy it accepts): its command thread
+sleeps that long before the `ok`, so every line behind waits in its buffer,
+as during M600, a long G29 or a slow move. Silent by default;
+`busy_keepalive="busy: processing"` (or `"echo:busy: paused for user"`)
+sends that line every `busy_interval` seconds meanwhile, as Marlin's
+HOST_KEEPALIVE does. `corrupt_lines={n, ...}` damages the first copy of each of
+those numbered lines on the wire (a resend of it is then certain).
+
 `marlin_resend=True` makes the printer's checksum-error resend request ask
 for the last accepted line + 1 as Marlin does (docs/domain.md §4: the
 VirtualPrinter asks for `current_line + 1`, a counter that drifts once other
@@ -42,6 +51,7 @@ import re
 import select
 import tempfile
 import threading
+import time
 import tty
 from pathlib import Path
 
@@ -103,9 +113,14 @@ _virtual.plugin_manager = lambda: _PluginManager()
 class RecordingVirtualPrinter(_virtual.VirtualPrinter):
     """The VirtualPrinter, logging each command that reaches command handling."""
 
-    def __init__(self, *args, marlin_resend: bool = False, **kwargs):
+    def __init__(self, *args, marlin_resend: bool = False, busy: dict | None = None,
+                 busy_keepalive: str | None = None, busy_interval: float = 0.05, **kwargs):
         # Set before the parent constructor: it starts the printer's threads.
         self.executed: list[str] = []
+        self.busy_periods: list[tuple[int, float]] = []  # (line number, seconds) as they happened
+        self._busy_after = dict(busy or {})
+        self._busy_keepalive = busy_keepalive
+        self._busy_interval = busy_interval
         self.swallowed: list[int] = []  # line numbers taken but not run (noise)
         self._marlin_resend = marlin_resend
         self._current_line = 0
@@ -147,22 +162,36 @@ class RecordingVirtualPrinter(_virtual.VirtualPrinter):
             self.swallowed.append(self.lastN)
         return super()._triggerResend(expected=expected, actual=actual, checksum=checksum)
 
+    def _ran(self, data):
+        self.executed.append(data)
+        seconds = self._busy_after.pop(self.lastN, None)
+        if seconds is not None:
+            # The command thread sleeps: nothing behind this line is read, run or answered meanwhile.
+            self.busy_periods.append((self.lastN, seconds))
+            end = time.monotonic() + seconds
+            while (left := end - time.monotonic()) > 0 and not self._killed:
+                if self._busy_keepalive:
+                    self._send(self._busy_keepalive)
+                    time.sleep(min(left, self._busy_interval))
+                else:
+                    time.sleep(left)
+
     # The printer has no _gcode_G/_gcode_M letter handlers; returning False
     # lets the normal command handler run.
     def _gcode_G(self, code, data):
-        self.executed.append(data)
+        self._ran(data)
         return False
 
     def _gcode_M(self, code, data):
-        self.executed.append(data)
+        self._ran(data)
         return False
 
     def _gcode_T(self, code, data):
-        self.executed.append(data)
+        self._ran(data)
         return super()._gcode_T(code, data)
 
     def _gcode_F(self, code, data):
-        self.executed.append(data)
+        self._ran(data)
         return super()._gcode_F(code, data)
 
 
@@ -185,6 +214,10 @@ class VirtualPrinterPty:
         settings: dict | None = None,
         marlin_resend: bool = False,
         corrupt_every: int = 0,
+        corrupt_lines=(),
+        busy: dict | None = None,
+        busy_keepalive: str | None = None,
+        busy_interval: float = 0.05,
         read_timeout: float = 0.5,
     ):
         values = default_settings()
@@ -198,9 +231,13 @@ class VirtualPrinterPty:
             data_folder=self._tmp.name,
             read_timeout=read_timeout,
             marlin_resend=marlin_resend,
+            busy=busy,
+            busy_keepalive=busy_keepalive,
+            busy_interval=busy_interval,
         )
         self._inject = dict(inject or {})
         self._corrupt_every = corrupt_every
+        self._corrupt_lines = set(corrupt_lines)
         self._line_count = 0
         self.corrupted = 0
         self.received_lines: list[bytes] = []  # host lines, as they went through
@@ -290,14 +327,22 @@ class VirtualPrinterPty:
         checksum field).
         """
         m = _LINE_NUMBER.match(line)
-        if not self._corrupt_every or not m or b"M110" in line:
+        if not m or b"M110" in line:
             return line
-        self._line_count += 1
         star = line.rfind(b"*")
         start = m.end() + 1
-        if self._line_count % self._corrupt_every or star - start < 1:
+        if star - start < 1:
             return line
-        pos = start + (self._line_count // self._corrupt_every) % (star - start)
+        if int(m.group(1)) in self._corrupt_lines:
+            self._corrupt_lines.discard(int(m.group(1)))
+            pos = start
+        else:
+            if not self._corrupt_every:
+                return line
+            self._line_count += 1
+            if self._line_count % self._corrupt_every:
+                return line
+            pos = start + (self._line_count // self._corrupt_every) % (star - start)
         flipped = line[pos] ^ 0x01
         if flipped in b"*\n\r":
             flipped = line[pos] ^ 0x02

@@ -49,10 +49,13 @@ class SerialPrinter(PrintLink):
 
     window: unacknowledged lines allowed in flight (1 = wait for each `ok`).
     rx_buffer: unacknowledged bytes allowed in flight.
-    timeout: seconds without an answer, with a line unanswered, before it is sent again.
-    blocking_timeout: the same while a blocking command (G29, M0, M109...) runs on a
-        printer that sends no keep-alives.
-    max_timeouts: consecutive unanswered resends before the link counts as lost.
+    timeout: the progress window: seconds without an answer or keep-alive, with a line
+        unanswered, before a poke (a numbered M105; nothing is sent again unless the
+        printer asks). See stream.py and docs/printer-faults.md.
+    max_timeouts: windows without a byte from the printer (or without progress) before
+        the link counts as lost (12 x 10 s by default: a 75 s busy move passes).
+    blocking_timeout: that limit in seconds while a blocking command (G29, M0, M109...)
+        runs on a printer that sends no keep-alives.
     boot_wait: seconds between connection hellos (a board that resets on open
         needs its bootloader time); connect_timeout: give up after this long.
     job_path: where the job state is saved (at the start, every 5 s, at the end).
@@ -68,7 +71,7 @@ class SerialPrinter(PrintLink):
         rx_buffer: int = 127,
         timeout: float = 10.0,
         blocking_timeout: float = 600.0,
-        max_timeouts: int = 5,
+        max_timeouts: int = 12,
         boot_wait: float = 3.0,
         connect_timeout: float = 15.0,
         temp_interval: float = 2.0,
@@ -117,8 +120,13 @@ class SerialPrinter(PrintLink):
 
     @property
     def timeouts(self) -> int:
-        """Times the host sent unanswered lines again."""
+        """Progress windows that ran out (each answered by a poke, or by none when one already waits)."""
         return self._stream.timeouts
+
+    @property
+    def pokes(self) -> int:
+        """M105 pokes sent for windows without progress."""
+        return self._stream.pokes
 
     @property
     def max_inflight(self) -> int:
@@ -361,8 +369,8 @@ class SerialPrinter(PrintLink):
                     step = stream.on_timeout(now)
                     if isinstance(step, Stop):
                         return Stop(step.reason, f"{step.message} on {self.port}")
-                    if step is Step.REWOUND:
-                        log.info("no answer: sending from line %d again", stream.next_number)
+                    if step is Step.POKE:
+                        log.info("no progress for %g s: poking with M105", stream.timeout)
                 report(stream.progress_kind())
                 continue
             if ev is _WAKE:
@@ -387,8 +395,9 @@ class SerialPrinter(PrintLink):
                 stream.state.read_temperatures(ev.temperatures)
             report(stream.progress_kind(), force=True)
         kind = ev.kind
+        stream.on_line(now)  # liveness: any line at all
         if kind == P.OK:
-            stream.on_ok(now)
+            stream.on_ok(now, temperatures=bool(ev.temperatures))
         elif kind == P.RESEND:
             step = stream.on_resend(ev.line, now)
             if isinstance(step, Stop):

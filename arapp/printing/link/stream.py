@@ -13,18 +13,33 @@ The rules (docs/domain.md §4, issue #14):
   its `ok` (or a resend request for a later line) arrives. Lines the host adds
   itself (temperature polls, a resume preamble, the cancel sequence) never
   move the job's position.
-- Only a reply that answers a line (`ok`, `Resend:`) resets the no-answer
-  timer. Keep-alives (`busy:`, temperature lines of a heat wait) extend it
-  only while a blocking command (M109, M190, G28, G29, G4, M0/M1, M600, M400)
-  is the oldest line unanswered; such a command gets no timeout while the
-  printer shows it is alive, and `blocking_timeout` of silence otherwise.
+- Liveness (issue #27): any line from the printer means it is alive. It
+  "stopped answering" only after `max_timeouts` windows (`timeout` seconds
+  each) in which nothing at all arrived while a line waited for its answer;
+  while a blocking command (M109, M190, G28, G29, G4, M0/M1, M600, M400) is
+  the oldest line unanswered on a printer that has sent no `busy:` yet, that
+  limit is `blocking_timeout` (a silent firmware homes or probes for minutes).
+- Progress: an answer (`ok`, `Resend:`) or a keep-alive that says the
+  firmware is working (`busy: processing`, `echo:busy: paused for user`, a
+  heat wait's temperature line) restarts the window. A window without one is
+  answered by a poke, never by sending a line again: a numbered `M105` on the
+  next free line number (`N<top+1> M105`), sent past the window while
+  Marlin's receive buffer has room. A busy firmware runs it after the line it
+  is busy with (harmless, nothing runs twice); a firmware that lost a line
+  refuses it by number and asks `Resend:` for the lost one; a firmware whose
+  `ok` was lost answers it `ok T:...`, which accounts for every line before
+  it (Marlin runs lines in order and takes N only after N-1). A line goes
+  out again only when the firmware asks for it. With no progress for as long
+  as the liveness limit although the printer talks (temperature reports
+  only), the stream stops too: it never waits for ever.
 - A resend request for a line the firmware confirmed, or for line 0 after the
   start-up exchange, cannot come from a healthy exchange (a reset without its
   banner, or noise): the stream stops (`StopReason.BAD_RESEND`), it never
   replays. A request is honoured once: the same request again, without an
   `Error:` line of its own, before the line was answered is a doubled reply,
   and its `ok` is absorbed.
-- Never more than `window` lines (and `rx_buffer` bytes) in flight.
+- Never more than `window` lines (and `rx_buffer` bytes) in flight, pokes
+  apart (they stop at `rx_buffer` bytes once one is in flight).
 
 Outcomes are typed: each `on_*` method returns a `Step` (what happened) or a
 `Stop` (why the stream must end); `finish` turns the end into a `Finish`
@@ -58,7 +73,8 @@ class Step(enum.Enum):
     CONFIRMED = "confirmed"  # one or more lines acknowledged
     REWOUND = "rewound"  # lines from `next_number` go out again
     IGNORED = "ignored"  # a stale or doubled reply, absorbed
-    WAITING = "waiting"  # a timer ran out but the printer is alive or the head is blocking
+    WAITING = "waiting"  # the deadline has not come yet
+    POKE = "poke"  # a window without progress: a numbered M105 goes out (frames_to_send)
     PAUSE = "pause"
     RESUME = "resume"
     CANCEL = "cancel"
@@ -68,7 +84,7 @@ class StopReason(enum.Enum):
     HALTED = "halted"  # the firmware said Error:/!! (not a line error)
     RESET = "reset"  # the firmware printed its start banner
     BAD_RESEND = "bad_resend"  # a resend request no healthy exchange produces
-    NO_ANSWER = "no_answer"  # timeouts in a row
+    NO_ANSWER = "no_answer"  # nothing from the printer (or no progress) for the liveness limit
     LINK_LOST = "link_lost"  # the port went away
     DISCONNECT = "disconnect"  # the printer asked the host to disconnect (//action:disconnect)
     FAILED = "failed"  # the host itself failed (an exception)
@@ -134,10 +150,11 @@ class LineStream:
     """The numbered-line exchange with one printer (see module doc).
 
     window: unacknowledged lines allowed in flight; rx_buffer: unacknowledged
-    bytes allowed in flight; timeout: seconds without an answer before the
-    unanswered lines go out again; blocking_timeout: the same, while a
-    blocking command with no keep-alive is the oldest line unanswered;
-    max_timeouts: timeouts in a row before the printer counts as gone;
+    bytes allowed in flight; timeout: the progress window, seconds without an
+    answer or keep-alive before a poke (M105); max_timeouts: windows without a
+    byte from the printer (or without progress) before it counts as gone;
+    blocking_timeout: that limit in seconds while a blocking command is the
+    oldest line unanswered on a printer that sends no keep-alives;
     poll_interval: seconds between host M105 polls (0: no polls);
     history_len: lines kept for resends.
     """
@@ -146,7 +163,7 @@ class LineStream:
     rx_buffer: int = 127
     timeout: float = 10.0
     blocking_timeout: float = 600.0
-    max_timeouts: int = 5
+    max_timeouts: int = 12
     poll_interval: float = 0.0
     history_len: int = 1024
 
@@ -162,11 +179,15 @@ class LineStream:
     cancelling: bool = False
     keepalive_seen: bool = False  # the printer sends busy: while it blocks (HOST_KEEPALIVE)
 
-    last_answer: float = 0.0
-    last_alive: float = 0.0
+    last_byte: float = 0.0  # liveness: the last line of any kind from the printer
+    last_progress: float = 0.0  # progress: the last answer or working keep-alive
+    last_tick: float = 0.0  # the last window that ran out (a poke, or one skipped for room)
     last_poll: float = 0.0
     error_seen_at: float | None = None
-    consecutive_timeouts: int = 0
+    consecutive_timeouts: int = 0  # windows without progress since the last progress
+    poke_due: bool = False
+    pokes: int = 0  # M105 pokes sent
+    plain_ok_seen: bool = False  # the firmware answers other lines with a bare `ok` (see on_ok)
     absorb_oks: int = 0
     honoured: tuple | None = None  # (line, confirmed then) of the last resend request honoured
     resends: int = 0
@@ -181,7 +202,8 @@ class LineStream:
         self.inflight.clear()
         self.next_number, self.top, self.confirmed = 1, 0, 0
         self.honoured, self.absorb_oks = None, 0
-        self.last_answer = self.last_alive = now
+        self.last_byte = self.last_progress = self.last_tick = now
+        self.poke_due = False
 
     def start(self, items, state: JobState | None, now: float) -> None:
         """Queue `items` for a run; `state` (None while connecting) follows the program lines."""
@@ -190,7 +212,8 @@ class LineStream:
         self.cancelling = False
         self.consecutive_timeouts = 0
         self.error_seen_at = None
-        self.last_answer = self.last_alive = self.last_poll = now
+        self.poke_due = False
+        self.last_byte = self.last_progress = self.last_tick = self.last_poll = now
 
     # ------------------------------------------------------------- sending
     def head(self) -> Item | None:
@@ -207,9 +230,15 @@ class LineStream:
     def frames_to_send(self, now: float) -> list[bytes]:
         """Frames to write now: lines to resend first, then new ones, while the window has room.
 
-        A due temperature poll (M105) goes out between program lines.
+        A due temperature poll (M105) goes out between program lines; a due
+        poke (on_timeout, on_wait) goes out first, past the window.
         """
         out = []
+        if self.poke_due:
+            self.poke_due = False
+            frame = self._poke(now)
+            if frame is not None:
+                out.append(frame)
         while len(self.inflight) < self.window and (not self.paused or self.next_number <= self.top):
             if self.next_number <= self.top:
                 frame = self.history[self.next_number][0]
@@ -224,11 +253,36 @@ class LineStream:
                 self.top = self.next_number
             else:
                 break
-            if self.inflight and sum(c.size for c in self.inflight) + len(frame) > self.rx_buffer:
+            if self.inflight and self._bytes_in_flight() + len(frame) > self.rx_buffer:
                 break  # Marlin's receive buffer would overflow; it goes out after the next answer
-            self._sent(frame, now)
+            self._sent(self.next_number, frame, now)
+            self.next_number += 1
             out.append(frame)
         return out
+
+    def _poke(self, now: float) -> bytes | None:
+        """A numbered M105 on the next free number (top + 1), or None when a poke already waits in
+        the printer's buffer and another would not fit in `rx_buffer` (it would only overflow)."""
+        number = self.top + 1
+        frame = P.frame(number, "M105")
+        waiting = any(self._is_m105(c) and not c.rejected for c in self.inflight)
+        if waiting and self._bytes_in_flight() + len(frame) > self.rx_buffer:
+            return None
+        self.history[number] = (frame, Item("M105"))
+        self.top = number
+        self._sent(number, frame, now)
+        if self.next_number == number:
+            self.next_number += 1
+        # else: a resend is going on; this line goes out again in its turn, after the resent ones.
+        self.pokes += 1
+        return frame
+
+    def _is_m105(self, copy: Copy) -> bool:
+        entry = self.history.get(copy.number)
+        return entry is not None and entry[1].command is None and entry[1].text == "M105"
+
+    def _bytes_in_flight(self) -> int:
+        return sum(c.size for c in self.inflight)
 
     def poll_frame(self, now: float) -> bytes | None:
         """A numbered M105 while paused (nothing else in flight), when a poll is due."""
@@ -238,14 +292,16 @@ class LineStream:
         frame = P.frame(self.next_number, "M105")
         self.history[self.next_number] = (frame, Item("M105"))
         self.top = self.next_number
-        self._sent(frame, now)
+        self._sent(self.next_number, frame, now)
+        self.next_number += 1
         return frame
 
-    def _sent(self, frame: bytes, now: float) -> None:
+    def _sent(self, number: int, frame: bytes, now: float) -> None:
         if not self.inflight:
-            self.last_answer = max(self.last_answer, now)  # the timer runs from the first line in flight
-        self.inflight.append(Copy(self.next_number, len(frame), self.epoch, now))
-        self.next_number += 1
+            # The timers run from the first line in flight: an idle printer may say nothing.
+            self.last_progress = max(self.last_progress, now)
+            self.last_byte = max(self.last_byte, now)
+        self.inflight.append(Copy(number, len(frame), self.epoch, now))
         self.max_inflight = max(self.max_inflight, len(self.inflight))
 
     def finished(self) -> bool:
@@ -253,10 +309,31 @@ class LineStream:
                 and self.confirmed >= self.top)
 
     # ------------------------------------------------------------- replies
-    def on_ok(self, now: float) -> Step:
-        """`ok`: the oldest copy in flight was answered (run, or refused when a resend request came first)."""
+    def on_line(self, now: float) -> None:
+        """Any line from the printer (liveness): call it before the reply's own method."""
+        self.last_byte = now
+
+    def on_ok(self, now: float, temperatures: bool = False) -> Step:
+        """`ok`: the oldest copy in flight was answered (run, or refused when a resend request came first).
+
+        `temperatures`: the ok carries a temperature report (`ok T:...`), which Marlin sends only as
+        the answer to M105. On a firmware that answers other lines with a bare `ok`, such an ok
+        answers the oldest M105 in flight: the copies before it lost their answers, and every line up
+        to that M105's number was taken (Marlin takes N only after N-1).
+        """
         self.error_seen_at = None
         self._answered(now)
+        if temperatures and self.plain_ok_seen:
+            for i, copy in enumerate(self.inflight):
+                if self._is_m105(copy) and not copy.rejected:
+                    for _ in range(i + 1):
+                        self.inflight.popleft()
+                    if copy.number <= self.confirmed:
+                        return Step.IGNORED
+                    self._confirm_through(copy.number)
+                    return Step.CONFIRMED
+        elif not temperatures:
+            self.plain_ok_seen = True
         if self.absorb_oks:
             self.absorb_oks -= 1
             return Step.IGNORED
@@ -292,6 +369,13 @@ class LineStream:
                 self.absorb_oks += 1  # a second request for the same stale copy: a doubled reply
             head.rejected = True  # answers a copy sent before the last rewind; its ok follows
             return Step.IGNORED
+        if head is not None and head.number >= line and any(c.number == line for c in list(self.inflight)[1:]):
+            # The copy refused is one the firmware got after it had missed `line` (a poke sent
+            # during a resend, say), and a copy of `line` is already on its way behind it: the
+            # firmware takes that one in its turn. Rewinding again would only stack more copies in
+            # its buffer, each answered later by the same request.
+            head.rejected = True
+            return Step.IGNORED
         if head is not None:
             head.rejected = True  # the ok that follows answers this request
         if line - 1 > self.confirmed:
@@ -308,29 +392,34 @@ class LineStream:
         return Step.NOTHING
 
     def on_wait(self, now: float) -> Step:
-        """`wait`: the printer is idle; a line unanswered for a while was lost on the way."""
-        if self.inflight and not self.head_is_blocking() and now - self.inflight[0].sent_at > 0.25:
+        """`wait`: the printer is idle with its queue empty. If everything in flight went out a while
+        ago and is unanswered, a line or its answer was lost: poke (the firmware's answer to the poke
+        says which; nothing is sent again unless it asks)."""
+        if self.inflight and not self.head_is_blocking() and now - self.inflight[-1].sent_at > 0.25:
             self.timeouts += 1
-            self._rewind(self.confirmed + 1)
-            return Step.REWOUND
+            self.last_tick = now
+            self.poke_due = True
+            return Step.POKE
         return Step.NOTHING
 
     def on_keepalive(self, reply: P.Reply, now: float) -> Step:
-        """`busy:` or a temperature report: extends the timer only for a blocking head (see module doc)."""
+        """`busy:` (any head) or a heat wait's temperature line (M109/M190 head, still heating): the
+        firmware is working on the oldest line; progress, so no poke (see module doc). Other
+        temperature lines only show the printer is alive (on_line)."""
         head = self.head()
         if head is None:
             return Step.NOTHING
         code = code_of(head.text)
         if reply.kind == P.BUSY:
-            if code in BLOCKING:
-                self.keepalive_seen = True
-                self.last_alive = now
-                self.consecutive_timeouts = 0
-            return Step.NOTHING
-        if code in HEAT_WAITS and self._heat_wait_going_on(head.text, code, reply):
-            self.last_alive = now
-            self.consecutive_timeouts = 0
+            self.keepalive_seen = True
+            self._working(now)
+        elif code in HEAT_WAITS and self._heat_wait_going_on(head.text, code, reply):
+            self._working(now)
         return Step.NOTHING
+
+    def _working(self, now: float) -> None:
+        self.last_progress = now
+        self.consecutive_timeouts = 0
 
     def _heat_wait_going_on(self, text: str, code: str, reply: P.Reply) -> bool:
         if _RESIDENCY.search(reply.text):
@@ -345,37 +434,49 @@ class LineStream:
         return False
 
     def deadline(self) -> float | None:
-        """When `on_timeout` is due (None: nothing in flight, no timer)."""
+        """When `on_timeout` is due: the end of the progress window (None: nothing in flight)."""
         if not self.inflight:
             return None
-        if self.head_is_blocking():
-            if self.keepalive_seen or self.last_alive > self.last_answer:
-                # The printer shows it is alive while it blocks (a keep-alive every ~2 s): no timeout
-                # while they come.
-                deadline = max(self.last_answer, self.last_alive) + self.timeout
-            else:
-                deadline = self.last_answer + self.blocking_timeout  # a silent firmware: minutes
-        else:
-            deadline = self.last_answer + self.timeout
+        deadline = max(self.last_progress, self.last_tick) + self.timeout
         if self.error_seen_at is not None:
+            # An `Error:` without its `Resend:` (a line without number, say): poke soon.
             deadline = min(deadline, self.error_seen_at + min(1.0, self.timeout))
         return deadline
 
+    def give_up_after(self) -> float:
+        """Seconds of silence (or of no progress) before the printer counts as gone (liveness)."""
+        limit = self.max_timeouts * self.timeout
+        if self.head_is_blocking() and not self.keepalive_seen:
+            limit = max(limit, self.blocking_timeout)  # a silent firmware homes or probes for minutes
+        return limit
+
     def on_timeout(self, now: float) -> Step | Stop:
-        """No answer by the deadline: send again from the first line not confirmed, or give up."""
+        """A progress window ran out: poke (frames_to_send sends it), or stop when the printer has
+        been silent, or has made no progress, for the liveness limit."""
         deadline = self.deadline()
         if deadline is None or now < deadline:
             return Step.WAITING
+        limit = self.give_up_after()
+        silent, stalled = now - self.last_byte, now - self.last_progress
+        if silent >= limit:
+            return Stop(StopReason.NO_ANSWER,
+                        f"the printer stopped answering (nothing at all received for {silent:.1f} s; "
+                        f"the limit is {limit:g} s)")
+        if stalled >= limit:
+            return Stop(StopReason.NO_ANSWER,
+                        f"the printer still talks but has acknowledged no line for {stalled:.1f} s "
+                        f"(the limit is {limit:g} s)")
         self.consecutive_timeouts += 1
         self.timeouts += 1
-        if self.consecutive_timeouts > self.max_timeouts:
-            return Stop(StopReason.NO_ANSWER,
-                        f"the printer stopped answering (no reply for {self.timeout:g} s, "
-                        f"{self.max_timeouts} times)")
+        if self.error_seen_at is not None and now >= self.error_seen_at + min(1.0, self.timeout):
+            # An `Error:` with no `Resend:` or `ok` after it (the VirtualPrinter's missing line
+            # number): that was the whole answer to the oldest copy; none follows. Not confirmed.
+            if self.inflight:
+                self.inflight.popleft()
         self.error_seen_at = None
-        self.last_answer = now
-        self._rewind(self.confirmed + 1)
-        return Step.REWOUND
+        self.last_tick = now
+        self.poke_due = True
+        return Step.POKE
 
     def on_action(self, action: str) -> Step | Stop:
         """`//action:<name>` from the printer (pause, resume, cancel, disconnect)."""
@@ -418,7 +519,8 @@ class LineStream:
         frame = P.frame(self.next_number, "M108")
         self.history[self.next_number] = (frame, Item("M108"))
         self.top = self.next_number
-        self._sent(frame, now)
+        self._sent(self.next_number, frame, now)
+        self.next_number += 1
         return [frame]
 
     # ------------------------------------------------------------- the end
@@ -448,14 +550,8 @@ class LineStream:
 
     # ------------------------------------------------------------- helpers
     def _answered(self, now: float) -> None:
-        self.last_answer = now
+        self.last_progress = self.last_byte = now
         self.consecutive_timeouts = 0
-
-    def _rewind(self, to: int) -> None:
-        self.inflight.clear()
-        self.epoch += 1
-        self.next_number = to
-        self.error_seen_at = None
 
     def _confirm_through(self, number: int) -> None:
         while self.confirmed < number:
