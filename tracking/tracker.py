@@ -562,9 +562,11 @@ class Tracker:
         webcam): the map, which holds the room, is dropped and no longer built (`_moving`)."""
         if self._moving or len(feats) < self.min_inliers or ar.covered:
             return
-        # the pose shown (a lone marker's filtered, a board's as measured): the test needs it steady
-        verdict = (self._background_verdict(self._anchor_output(ar), feats)
-                   if self._lost == 0 and self.motion.steps >= 3 else None)
+        # only a board that fits well holds its turn to a few hundredths of a degree; a lone marker's pose turns
+        # by a degree with its noise (5-9 px at the image edge: a still desk then reads as moving)
+        verdict = (self._background_verdict(anchor_pose, feats)
+                   if self._lost == 0 and self.motion.steps >= 3 and self._board_fit(ar) is not None
+                   and self._fits_well(ar) else None)
         off = ~on_anchor(X, self._anchors.outlines)
         if verdict is None and off.sum() >= self.min_inliers:
             p, pi, _, inl = self._track_map(anchor_pose, X[off], D[off], feats)
