@@ -1,7 +1,9 @@
 """Detected markers outlined with their axes, painted over the live view (View > Show detected markers).
 
 What to draw comes from `arapp.app.overlay_marks.marker_marks` (frame pixels, no Qt) for the frame
-being shown; this module only paints it over the VideoView's frame rectangle.
+being shown; this module only paints it over the VideoView's frame rectangle. The marks lie on the paper
+under the model: where the placed model covers a line it is painted only as much as the display mode's
+surface lets it show through (not at all when shaded).
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from PySide6.QtCore import QEvent, QObject, QPointF, Qt
 from PySide6.QtGui import QAction, QColor, QPainter, QPen
 from PySide6.QtWidgets import QWidget
 
-from arapp.app.overlay_marks import MarkerMarks, marker_marks
+from arapp.app.overlay_marks import MarkerMarks, marker_marks, model_cover, model_world_vertices
 
 SETTING = "view/show_marker_marks"
 OUTLINE = QColor(0, 230, 255)            # cyan: stands out on paper, skin and wood alike
@@ -47,16 +49,21 @@ class MarksOverlay(QWidget):
         p = QPainter(self)
         p.setRenderHint(QPainter.RenderHint.Antialiasing, True)
         p.setClipRect(rect)
-        p.setPen(QPen(OUTLINE, 2.0))
-        for quad in m.quads:
-            pts = [pt(uv) for uv in quad]
-            for a, b in zip(pts, pts[1:] + pts[:1]):
-                p.drawLine(a, b)
-        for origin, *ends in m.axes:
-            o = pt(origin)
-            for colour, end in zip(AXIS_COLOURS, ends):
-                p.setPen(QPen(colour, 3.0, Qt.PenStyle.SolidLine, Qt.PenCapStyle.RoundCap))
-                p.drawLine(o, pt(end))
+
+        outline_pen = QPen(OUTLINE, 2.0)
+        axis_pen = QPen(OUTLINE, 3.0, Qt.PenStyle.SolidLine, Qt.PenCapStyle.FlatCap)
+        lines = m.lines()
+        for (_a, _b, kind), runs in zip(lines, m.runs([(a, b) for a, b, _ in lines])):
+            colour, pen = (OUTLINE, outline_pen) if kind < 0 else (AXIS_COLOURS[kind], axis_pen)
+            for s, e, covered in runs:
+                if covered and m.under_opacity <= 0:
+                    continue  # under an opaque model: hidden, as the paper there is
+                c = QColor(colour)
+                if covered:
+                    c.setAlphaF(m.under_opacity)  # seen through the model's surface
+                pen.setColor(c)
+                p.setPen(pen)
+                p.drawLine(pt(s), pt(e))
         p.end()
 
 
@@ -77,14 +84,28 @@ def install_marks(window) -> MarksOverlay:
             a.menu().addAction(action)
             break
 
+    placed = {}  # (model, mesh, placement, anchor) ids -> the mesh's world vertices: moved only when they change
+
+    def cover_of(info, r):
+        mesh = (session.mesh_lines or (None,))[0]
+        if session.model is None or mesh is None or r.world_from_camera is None or not info.anchors:
+            return None
+        key = (id(session.model), id(mesh), repr(session.placement), id(info.anchors[0]))
+        if key not in placed:
+            placed.clear()
+            placed[key] = model_world_vertices(session.model, mesh, session.placement, info.anchors[0])
+        return model_cover(info.camera, placed[key], mesh.faces, r.world_from_camera)
+
     def refresh(_shown=None):
         shown, info = session.last_shown, session.source_info
         if not action.isChecked() or shown is None or info is None or info.camera is None:
             overlay.marks = None
         else:
             r = shown.result
-            overlay.marks = marker_marks(info.camera, info.anchors, r.world_from_camera,
-                                         r.markers if r.state == "marker" else 0)
+            seen = r.markers if r.state == "marker" else 0
+            cover = cover_of(info, r) if seen else None
+            overlay.marks = marker_marks(info.camera, info.anchors, r.world_from_camera, seen, cover=cover,
+                                         mode=session.display_mode)
         overlay.update()
 
     def toggled(checked: bool):
