@@ -7,6 +7,16 @@ STAMP  := $(VENV)/.arapp-installed
 # The real OctoPrint server for the REST-link tests lives in its own environment (see the requirements file).
 OCTO   := .venv-octoprint
 OCTO_STAMP := $(OCTO)/.installed
+# The real Moonraker and the Klipper host behind it, for the Moonraker-link tests: each in its own environment.
+MOON   := .venv-moonraker
+MOON_STAMP := $(MOON)/.installed
+KLIPPY := .venv-klippy
+KLIPPY_STAMP := $(KLIPPY)/.installed
+SERVER_STAMPS := $(OCTO_STAMP) $(MOON_STAMP) $(KLIPPY_STAMP)
+
+# `make test` runs the suite in TEST_WORKERS processes (pytest-xdist), one per core of CI's 2-core machine;
+# --dist loadfile keeps each test file on one worker, so its module fixtures are built once. 0: one process.
+TEST_WORKERS ?= 2
 
 export PYOPENGL_PLATFORM ?= egl
 export QT_QPA_PLATFORM ?= offscreen
@@ -14,7 +24,7 @@ export MPLBACKEND ?= Agg
 
 .PHONY: setup demo test bench clean
 
-setup: $(STAMP) $(OCTO_STAMP)
+setup: $(STAMP) $(SERVER_STAMPS)
 
 $(STAMP): pyproject.toml constraints.txt requirements-peers.txt scripts/system-deps.sh
 	./scripts/system-deps.sh prusa-slicer
@@ -33,14 +43,28 @@ $(OCTO_STAMP): requirements-octoprint-server.txt
 	$(OCTO)/bin/python -m pip install -q -r requirements-octoprint-server.txt
 	touch $(OCTO_STAMP)
 
+$(MOON_STAMP): requirements-moonraker-server.txt
+	test -x $(MOON)/bin/python || $(PYTHON) -m venv $(MOON)
+	$(MOON)/bin/python -m pip install -q --upgrade pip
+	$(MOON)/bin/python -m pip install -q -r requirements-moonraker-server.txt
+	touch $(MOON_STAMP)
+
+# Klippy's build compiles its C helper and hub-ctrl (which includes usb.h: libusb-dev).
+$(KLIPPY_STAMP): requirements-klippy-server.txt scripts/system-deps.sh
+	./scripts/system-deps.sh gcc libusb-dev
+	test -x $(KLIPPY)/bin/python || $(PYTHON) -m venv $(KLIPPY)
+	$(KLIPPY)/bin/python -m pip install -q --upgrade pip
+	$(KLIPPY)/bin/python -m pip install -q -r requirements-klippy-server.txt
+	touch $(KLIPPY_STAMP)
+
 demo: $(STAMP)
 	$(ARAPP) demo --out out/demo
 
-test: $(STAMP) $(OCTO_STAMP)
-	$(VENV)/bin/lint-imports --no-cache && $(PY) -m pytest -q -p no:cacheprovider tests
+test: $(STAMP) $(SERVER_STAMPS)
+	$(VENV)/bin/lint-imports --no-cache && $(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile tests
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py --out BENCHMARKS.md $(if $(ONLY),--only $(ONLY) --merge)
 
 clean:
-	rm -rf $(VENV) $(OCTO) out
+	rm -rf $(VENV) $(OCTO) $(MOON) $(KLIPPY) out

@@ -35,3 +35,7 @@ def threads_window(qtbot, tmp_path, config_dir, monkeypatch):
     w.show()
     yield w
     close_main_window(w)
+
+
+# The real Moonraker + Klippy, started once per session for every test that asks (tests/moonraker_server.py).
+from moonraker_server import moonraker_server  # noqa: E402,F401

@@ -1,4 +1,5 @@
-"""`arapp print`: slice a model (or take G-code) and print it over USB serial or OctoPrint."""
+"""`arapp print`: slice a model (or take G-code) and print it over USB serial, OctoPrint, Moonraker (Klipper)
+or PrusaLink."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import sys
 import threading
 from pathlib import Path
 
-HELP = "print a model or G-code on a Marlin printer (USB serial) or through OctoPrint"
+HELP = "print a model or G-code on a Marlin printer (USB serial) or through OctoPrint, Moonraker (Klipper) or PrusaLink"
 
 GCODE_SUFFIXES = (".gcode", ".gco", ".g")
 
@@ -20,10 +21,14 @@ def add_arguments(parser):
                                      "default: the printer profile's link.port")
     link.add_argument("--baud", type=int, default=None, help="baud rate (default: profile's, 115200)")
     link.add_argument("--octoprint", metavar="URL", help="OctoPrint server, e.g. http://octopi.local")
-    link.add_argument("--api-key-file", metavar="F", help="file holding the OctoPrint API key (mode 600)")
+    link.add_argument("--moonraker", metavar="URL",
+                      help="Moonraker server of a Klipper printer, e.g. http://mainsailos.local or http://host:7125 "
+                           "(no key needed from one of its trusted_clients)")
+    link.add_argument("--api-key-file", metavar="F",
+                      help="file holding the OctoPrint, Moonraker or PrusaLink API key (mode 600)")
     link.add_argument("--save-key", metavar="F",
-                      help="store an OctoPrint API key in F with mode 600 (read from $ARAPP_OCTOPRINT_API_KEY, "
-                           "or asked for without echo) and use it")
+                      help="store an API key in F with mode 600 (read from $ARAPP_API_KEY or "
+                           "$ARAPP_OCTOPRINT_API_KEY, or asked for without echo) and use it")
     parser.add_argument("--printer", default=None, metavar="PROFILE",
                         help="printer profile JSON (arapp-printer/1) or shipped name")
     parser.add_argument("--resume", metavar="JOB.json", help="continue a print whose link dropped (serial only)")
@@ -53,15 +58,27 @@ def add_arguments(parser):
     sl.add_argument("--retract", type=float, default=1.0, metavar="MM")
 
 
-def _read_key_interactively() -> str:
-    key = os.environ.get("ARAPP_OCTOPRINT_API_KEY", "")
+def _read_key_interactively(what: str = "API key") -> str:
+    key = os.environ.get("ARAPP_API_KEY", "") or os.environ.get("ARAPP_OCTOPRINT_API_KEY", "")
     if key:
         return key
     if sys.stdin.isatty():
         import getpass
 
-        return getpass.getpass("OctoPrint API key: ")
+        return getpass.getpass(f"{what}: ")
     return sys.stdin.readline()
+
+
+# The network links: flag -> (name, target maker); a target's key file may be "" where the server allows it.
+def _network_links():
+    from arapp.printing.link.factory import MoonrakerTarget, OctoPrintTarget
+
+    return {"octoprint": ("OctoPrint", lambda args: OctoPrintTarget(args.octoprint, args.api_key_file)),
+            "moonraker": ("Moonraker", lambda args: MoonrakerTarget(args.moonraker, args.api_key_file or ""))}
+
+
+def _chosen_links(args) -> list[str]:
+    return [flag for flag in ("octoprint", "moonraker", "prusalink") if getattr(args, flag, None)]
 
 
 def _slice_model(args, profile) -> Path:
@@ -173,8 +190,10 @@ def _check_job_file(job_path: Path, state) -> None:
 
 def _check_link_args(args) -> None:
     """One link, a window of at least one line, a timeout under a day; ValueError naming the option otherwise."""
-    if args.port and args.octoprint:
-        raise ValueError("give either --port (USB serial) or --octoprint URL, not both")
+    chosen = (["port"] if args.port else []) + _chosen_links(args)
+    if len(chosen) > 1:
+        raise ValueError(f"give one link (--port, --octoprint, --moonraker or --prusalink), not "
+                         f"{' and '.join('--' + c for c in chosen)}")
     if args.window < 1:
         raise ValueError(f"--window must be at least 1 line, got {args.window}")
     if not (0 < args.timeout < 86400):
@@ -194,7 +213,7 @@ def _job_to_resume(args, profile):
         if args.input is None:
             raise ValueError("nothing to print: give a G-code file or a model (or --resume JOB.json)")
         return None, Path(args.input)
-    if args.octoprint:
+    if _chosen_links(args):
         raise ValueError("--resume works with the serial link (--port) only")
     state = JobState.load(args.resume, profile)
     check_resumable(state, args.resume, after_halt=args.after_halt)
@@ -205,7 +224,7 @@ def _job_to_resume(args, profile):
 
 
 def run(args) -> int:
-    from arapp.printing.link.factory import OctoPrintTarget, SerialTarget, make_link
+    from arapp.printing.link.factory import SerialTarget, make_link
     from arapp.printing.link.job import Program, resume_commands
 
     if args.save_key:
@@ -219,7 +238,8 @@ def run(args) -> int:
             return 0
     _check_link_args(args)
     profile = None
-    if args.printer is not None or args.resume or (not args.octoprint and not args.port) or (
+    network = _chosen_links(args)
+    if args.printer is not None or args.resume or (not network and not args.port) or (
             args.input and Path(args.input).suffix.lower() not in GCODE_SUFFIXES):
         from arapp.printing import load_profile
 
@@ -236,10 +256,11 @@ def run(args) -> int:
     _check_job_file(job_path, state)
     show = _progress_writer(sys.stderr)
 
-    if args.octoprint:
-        link = make_link(OctoPrintTarget(args.octoprint, args.api_key_file), profile=profile, job_path=job_path)
+    if network:
+        name, target = _network_links()[network[0]]
+        link = make_link(target(args), profile=profile, job_path=job_path)
         link.connect()
-        print(f"connected to {link.version or 'OctoPrint'} at {link.url}", file=sys.stderr)
+        print(f"connected to {link.version or name} at {link.url}", file=sys.stderr)
         job = lambda: link.print_gcode(lines, progress=show, gcode_path=str(gcode_path))  # noqa: E731
     else:
         port = args.port or (profile.link.port if profile is not None else None)

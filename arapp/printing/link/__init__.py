@@ -1,4 +1,4 @@
-"""Printer links: Marlin over USB serial, and OctoPrint's REST API.
+"""Printer links: Marlin over USB serial, OctoPrint's REST API, Moonraker (Klipper) and PrusaLink.
 
 `SerialPrinter` and `OctoPrintLink` share the `PrintLink` interface and report
 `Progress` (lines, layer, percent, ETA, temperatures); `make_link(target)`
@@ -7,13 +7,14 @@ protocol's rules are the state object `stream.LineStream`.
 """
 
 from .base import LinkError, LinkLost, PrinterHalted, PrinterReset, PrintLink, Progress
-from .factory import OctoPrintTarget, SerialTarget, make_link
+from .factory import MoonrakerTarget, OctoPrintTarget, SerialTarget, make_link
 from .job import JobFileError, JobState, Program, cancel_commands, resume_commands
 
 __all__ = [
     "LinkError", "LinkLost", "PrinterHalted", "PrinterReset", "PrintLink", "Progress",
     "JobFileError", "JobState", "Program", "cancel_commands", "resume_commands",
     "SerialPrinter", "OctoPrintLink", "make_link", "SerialTarget", "OctoPrintTarget",
+    "MoonrakerTarget",
 ]
 
 

@@ -34,6 +34,14 @@ class OctoPrintTarget:
     api_key_file: str
 
 
+@dataclass(frozen=True)
+class MoonrakerTarget:
+    """A Klipper printer behind Moonraker, and the file holding its API key ("" on a trusted LAN)."""
+
+    url: str
+    api_key_file: str = ""
+
+
 def _serial(target: SerialTarget, profile, job_path) -> PrintLink:
     from .serial_link import SerialPrinter  # each backend's dependencies load only when it is chosen
 
@@ -54,11 +62,22 @@ def _octoprint(target: OctoPrintTarget, profile, job_path) -> PrintLink:
     return OctoPrintLink(target.url, load_api_key(target.api_key_file), job_path=job_path)
 
 
+def _moonraker(target: MoonrakerTarget, profile, job_path) -> PrintLink:
+    from .moonraker import MoonrakerLink
+    from .octoprint import load_api_key
+
+    if not target.url:
+        raise ValueError("give the Moonraker URL (e.g. http://mainsailos.local or http://host:7125)")
+    key = load_api_key(target.api_key_file) if target.api_key_file else None
+    return MoonrakerLink(target.url, key, job_path=job_path)
+
+
 _MAKERS: dict[type, Callable] = {SerialTarget: _serial, OctoPrintTarget: _octoprint}
+_MAKERS[MoonrakerTarget] = _moonraker
 
 
 def make_link(target, *, profile=None, job_path=None) -> PrintLink:
-    """The link for `target` (SerialTarget or OctoPrintTarget), not connected yet.
+    """The link for `target` (SerialTarget, OctoPrintTarget, MoonrakerTarget, ...: `_MAKERS`), not connected yet.
 
     profile: the printer profile (its bed height caps a cancel's nozzle lift);
     job_path: where the job state is kept. Raises ValueError for an incomplete

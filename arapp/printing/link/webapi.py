@@ -1,0 +1,115 @@
+"""What the HTTP printer links (Moonraker, PrusaLink) share: the base URL check, a session that keeps
+secrets on their host, the server's own refusal text, and the map from a file position to the job's
+progress.
+
+Secrets rules (the same as OctoPrint's key, arapp.printing.link.octoprint): keys and passwords are read
+from files of mode 600 (`load_api_key`), never taken on the command line, never put in a message, a
+log, a repr or a job file; `SecretSession` drops the `X-Api-Key` and `Authorization` headers *and* the
+digest-auth hook (which would answer another host's challenge with our password) from a redirect to
+another scheme, host or port; a URL holding a user name or password is refused and `redact_url` is all
+any message shows of a URL.
+"""
+
+from __future__ import annotations
+
+import bisect
+from collections.abc import Sequence
+from urllib.parse import urlsplit
+
+import requests
+
+from .job import Program
+from .octoprint import API_KEY_HEADER, redact_url
+
+__all__ = ["check_base_url", "SecretSession", "server_message", "FileProgress", "redact_url", "gcode_bytes"]
+
+
+def check_base_url(url: str, what: str, example: str) -> str:
+    """`url` without a trailing slash when it is http(s)://host[:port][/path] with no credentials, query or
+    fragment; ValueError naming `what` (e.g. "Moonraker") and showing the URL redacted otherwise."""
+    text = str(url).strip()
+    try:
+        parts = urlsplit(text)
+        _ = parts.port  # ValueError for a port that is not a number or out of range
+    except ValueError:
+        raise ValueError(f"{what} URL {redact_url(text)!r} cannot be parsed; give e.g. {example}") from None
+    if parts.scheme not in ("http", "https") or not parts.hostname:
+        raise ValueError(f"{what} URL must start with http:// or https:// and name a host (e.g. {example}), "
+                         f"got {redact_url(text)!r}")
+    if parts.username is not None or parts.password is not None:
+        raise ValueError(f"{what} URL {redact_url(text)!r} holds a user name or password; give it without "
+                         "them (arapp reads keys and passwords from files of mode 600, and would otherwise "
+                         "print and store the password)")
+    if parts.query or parts.fragment:
+        raise ValueError(f"{what} URL {redact_url(text)!r} has a query or fragment; give the server's base URL only")
+    return text.rstrip("/")
+
+
+class SecretSession(requests.Session):
+    """A requests Session whose secrets stay with the server they were meant for: on a redirect to another
+    scheme, host or port, `X-Api-Key` is removed (requests itself strips only `Authorization`) and so are
+    the response hooks (HTTPDigestAuth's hook would answer the new host's 401 challenge with a digest of
+    our password)."""
+
+    def rebuild_auth(self, prepared_request, response):
+        super().rebuild_auth(prepared_request, response)
+        if self.should_strip_auth(response.request.url, prepared_request.url):
+            prepared_request.headers.pop(API_KEY_HEADER, None)
+            prepared_request.headers.pop("Authorization", None)
+            prepared_request.hooks["response"] = []
+
+
+def server_message(r: requests.Response, limit: int = 200) -> str:
+    """The reason a server gave for refusing a request, on one line: Moonraker's `{"error": {"message"}}`,
+    PrusaLink's `{"title", "message"}`, else the body's text (tracebacks and HTML dropped)."""
+    try:
+        body = r.json()
+    except ValueError:
+        body = None
+    text = ""
+    if isinstance(body, dict):
+        err = body.get("error")
+        if isinstance(err, dict):
+            text = str(err.get("message") or "")
+        elif isinstance(err, str):
+            text = err
+        if not text:
+            text = " ".join(str(body[k]) for k in ("title", "message") if body.get(k))
+    elif r.text and not r.text.lstrip().startswith("<"):
+        text = r.text
+    return " ".join(text.split())[:limit]
+
+
+def gcode_bytes(lines: Sequence[str]) -> bytes:
+    """The job's file as it is uploaded: every line ended by one newline, UTF-8."""
+    return "".join(line if line.endswith("\n") else line + "\n" for line in lines).encode("utf-8")
+
+
+class FileProgress:
+    """Maps how far a server has read the uploaded file (bytes, or a fraction of them) to the commands
+    it has run and the layer it is in (`Program`'s layer numbering)."""
+
+    def __init__(self, data: bytes, program: Program):
+        starts, pos = [], 0
+        for line in data.split(b"\n"):
+            starts.append(pos)
+            pos += len(line) + 1
+        self.size = len(data)
+        self.program = program
+        # byte offset just after each command's line (its newline included): a command is done once the
+        # reader is past it
+        ends = []
+        for c in program.commands:
+            nxt = starts[c.index + 1] if c.index + 1 < len(starts) else self.size
+            ends.append(min(nxt, self.size))
+        self._ends = ends
+
+    def at(self, position: float) -> tuple[int, int]:
+        """(commands done, layer) once the reader is at byte `position`; the layer is -1 before the first."""
+        done = bisect.bisect_right(self._ends, int(position))
+        layer = self.program.commands[done - 1].layer if done > 0 else -1
+        return done, layer
+
+    def at_fraction(self, fraction: float) -> tuple[int, int]:
+        """(commands done, layer) at `fraction` (0..1) of the file's bytes."""
+        return self.at(max(0.0, min(1.0, float(fraction))) * self.size)
