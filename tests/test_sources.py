@@ -193,7 +193,8 @@ def test_source_specs_and_missing_devices(tmp_path):
         open_source("  ")
     not_video = tmp_path / "notes.txt"
     not_video.write_text("hello")
-    with pytest.raises(SourceError, match="notes.txt: (OpenCV cannot open|the video opens but no frame)"):
+    # issue 25: a text file is named as one (was "OpenCV cannot open" or "no frame")
+    with pytest.raises(SourceError, match="notes.txt: a text file, not a video"):
         open_source(f"file:{not_video}")
 
 
