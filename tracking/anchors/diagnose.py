@@ -1,9 +1,14 @@
 """Why the anchors of a session are not found (or found badly) in an image: plain-language hints.
 
-Checks: markers of another dictionary than declared; markers of the right
-dictionary with other ids; QR codes with other texts; boards whose declared
-marker_length / separation do not fit the image (large reprojection error);
-anchors whose declared size disagrees with the others seen with them.
+`diagnose` checks one image: markers of another dictionary than declared; markers of the right
+dictionary with other ids; QR codes with other texts; boards whose declared marker_length /
+separation do not fit the image (large reprojection error); anchors whose declared size disagrees
+with the others seen with them.
+
+`why_untracked` words why a whole run (a replay, a GUI session) tracked nothing, from what anchor
+discovery (anchors/discover.py) saw in its frames: no marker seen at all, markers of another
+dictionary or polarity, markers of the right dictionary with other ids, QR codes with other text, or
+the anchor list's default in use; `suggestion_line` offers what discovery found as `--anchors` JSON.
 """
 
 from __future__ import annotations
@@ -11,7 +16,12 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+import json
+
 from tracking.anchors.detect import ARUCO_FAMILIES, ArucoDetection
+from tracking.anchors.discover import DEFAULT_MARKER_M, Discovery, Suggestion, family_of, id_span
+from tracking.anchors.kinds.base import mm
+from tracking.anchors.kinds.qr import normal_text
 from tracking.anchors.model import build_models
 from tracking.anchors.pose import solve_pose
 from tracking.camera import Camera
@@ -65,9 +75,10 @@ def diagnose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarray, max_b
     if qr_models:
         ok, texts, _, _ = cv2.QRCodeDetector().detectAndDecodeMulti(gray)
         texts = [t for t in (texts if ok else []) if t]
-        wanted = {m.spec.text for m in qr_models}
+        read = {normal_text(t) for t in texts}
+        wanted = {normal_text(m.spec.text) for m in qr_models}
         for m in qr_models:
-            if m.spec.text not in texts and texts and not (set(texts) & wanted):
+            if normal_text(m.spec.text) not in read and texts and not (read & wanted):
                 hints.append(f"anchors[{m.index}]: no QR code with text {m.spec.text!r}, but the image shows "
                              f"QR code(s) {texts}: set anchors[{m.index}].text to the printed text")
     # Geometry: each board alone must fit its own declared layout; anchors seen together must agree on scale.
@@ -106,3 +117,66 @@ def diagnose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarray, max_b
 def _ids(ids) -> str:
     ids = list(ids)
     return ", ".join(map(str, ids[:8])) + (", ..." if len(ids) > 8 else "")
+
+
+# -- a run that tracked nothing ---------------------------------------------------------------------
+def why_untracked(anchors: list[AnchorSpec], found: Discovery, default_anchors: bool = False) -> list[str]:
+    """One-line reasons why a run with `anchors` tracked nothing, from what `found` saw in its frames
+    (discover.Discovery); the first is the likeliest. `default_anchors`: the anchors are the default
+    the command used because none were given (a plain video, `arapp record` without --anchors)."""
+    reasons = []
+    seen = found.markers_seen
+    texts = found.texts_seen
+    looked = f"{found.frames_looked} frame{'s' if found.frames_looked != 1 else ''} looked at"
+    if default_anchors:
+        what = " or ".join(a.anchor_kind.describe(a) for a in anchors)
+        reasons.append(f"no anchors were given, so the default ({what}) was looked for")
+    for i, a in enumerate(anchors):
+        if a.anchor_kind.detector == "qr":
+            other = [t for t in texts if normal_text(t) != normal_text(a.text)]
+            if other and len(other) == len(texts):
+                shown = ", ".join(repr(t) for t in other[:3])
+                reasons.append(f"QR codes with other text seen ({shown}), not anchors[{i}].text {a.text!r}")
+            continue
+        family = family_of(a.dictionary)
+        want = set(a.marker_ids())
+        for (fam, pol), ids in seen.items():
+            if fam != family:
+                continue
+            hit = want & set(ids)
+            if pol != a.polarity and a.polarity != "auto" and hit:
+                reasons.append(f"{a.dictionary} markers seen printed {pol}"
+                               f"{' (white on black)' if pol == 'inverted' else ''}, but anchors[{i}].polarity is "
+                               f"{a.polarity!r}: set it to {pol!r} or \"auto\"")
+            elif hit:
+                reasons.append(f"anchors[{i}]'s markers were seen (ids {id_span(sorted(hit))}) but gave no pose: "
+                               f"too few, too small or too blurred (hold the sheet closer and steadier)")
+            else:
+                reasons.append(f"{a.dictionary.rsplit('_', 1)[0] if family else a.dictionary} markers seen with ids "
+                               f"{id_span(ids)}, not anchors[{i}]'s ids {id_span(sorted(want))}: check "
+                               f"anchors[{i}].id / first_id")
+    ours = {family_of(a.dictionary) for a in anchors if a.dictionary}
+    others = {k: v for k, v in seen.items() if k[0] not in ours}
+    if others:
+        shown = "; ".join(f"{fam.rsplit('_', 1)[0] if fam[5:6].isdigit() else fam} ids {id_span(ids)}"
+                          + (" (printed inverted)" if pol == "inverted" else "") for (fam, pol), ids in others.items())
+        dicts = ", ".join(sorted({a.dictionary for a in anchors if a.dictionary})) or "QR codes"
+        reasons.append(f"markers of another dictionary seen ({shown}), not the anchors' {dicts}")
+    if texts and not any(a.anchor_kind.detector == "qr" for a in anchors):
+        reasons.append(f"QR codes seen ({', '.join(repr(t) for t in texts[:3])}) but no QR anchor is set up")
+    if not seen and not texts:
+        reasons.append(f"no marker or QR code of any dictionary seen ({looked}, both polarities)")
+    return reasons
+
+
+def why_line(anchors: list[AnchorSpec], found: Discovery, default_anchors: bool = False) -> str:
+    """'nothing tracked: <reasons>' in one line (why_untracked)."""
+    return "nothing tracked: " + "; ".join(why_untracked(anchors, found, default_anchors))
+
+
+def suggestion_line(s: Suggestion) -> str:
+    """'found a 4x3 DICT_4X4_50 board (ids 0-11); with 40 mm markers (measure yours) use --anchors FILE
+    holding: [{...}]' for a discovery's suggestion."""
+    size = "a 50 mm code" if s.kind == "qr" else f"{mm(DEFAULT_MARKER_M)} markers"
+    return (f"found {s.summary}; assuming {size} (measure yours and scale {s.size_field}), use --anchors FILE "
+            f"holding: {json.dumps([s.block])}")
