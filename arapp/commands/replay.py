@@ -66,4 +66,15 @@ def run(args):
           + ("" if args.no_video else ", overlay.mp4"))
     if report.get("source_error"):
         print(f"replay: warning: {report['source_error']}")
+    say_why_untracked(args, report)
     return 130 if report.get("interrupted") else 0
+
+
+def say_why_untracked(args, report) -> None:
+    """A replay that tracked nothing says why, and what the video shows instead (arapp/untracked.py)."""
+    if not report.get("frames") or report.get("tracked_fraction"):
+        return
+    from arapp.untracked import untracked_lines_for  # discovery's detectors: only for a replay that needs them
+
+    for line in untracked_lines_for(args.recording, args.calibration, args.anchors):
+        print(f"replay: {line}")
