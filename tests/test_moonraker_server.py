@@ -230,3 +230,39 @@ def test_the_app_job_reports_layers_from_moonraker(moonraker_server, tmp_path):
     assert resumed and resumed[0].layer == 1 and resumed[0].layer_count == 3
     layers = [e.progress.layer for e in events if e.progress is not None]
     assert layers == sorted(layers) and layers[-1] == 2
+
+
+def test_a_profile_with_a_moonraker_link_prints_without_link_flags(moonraker_server, tmp_path, capsys):
+    import json
+
+    from arapp.cli import main
+
+    prof = tmp_path / "voron.json"
+    prof.write_text(json.dumps({"format": "arapp-printer/1", "name": "Voron 0.2",
+                                "bed": {"width": 120, "depth": 120, "height": 120},
+                                "link": {"kind": "moonraker", "url": moonraker_server.url}}))
+    g = tmp_path / "from-profile.gcode"
+    g.write_text("\n".join(job(300)) + "\n")
+    rc = main(["print", str(g), "--printer", str(prof)])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    assert f"at {moonraker_server.url}" in out.err and out.out.startswith("done:")
+    assert (moonraker_server.gcodes / "from-profile.gcode").read_bytes() == g.read_bytes()
+
+
+@pytest.mark.parametrize("link, says", [
+    ({"kind": "klipper", "url": "http://x"}, "link.kind: 'klipper' is not a link kind; use one of serial, "
+                                             "octoprint, moonraker"),
+    ({"kind": "moonraker"}, "link.url: missing (a moonraker link needs the server's address"),
+    ({"kind": "moonraker", "url": "http://x", "api_key": "abc"}, "link.api_key: unknown key"),
+])
+def test_profile_link_kind_errors_name_the_key(tmp_path, link, says):
+    from arapp.printing.profile import ProfileError, parse_profile
+
+    data = {"format": "arapp-printer/1", "name": "p", "bed": {"width": 100, "depth": 100, "height": 100},
+            "link": link}
+    with pytest.raises(ProfileError) as info:
+        parse_profile(data, "p.json", defaults={"link": {"port": "", "baud": 115200}, "flavor": "marlin",
+                                                "nozzle_diameter": 0.4, "filament_diameter": 1.75,
+                                                "start_gcode": "", "end_gcode": ""})
+    assert says in str(info.value) and str(info.value).startswith("p.json: ")

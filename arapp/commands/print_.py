@@ -256,6 +256,14 @@ def run(args) -> int:
     _check_job_file(job_path, state)
     show = _progress_writer(sys.stderr)
 
+    kind = profile.link.kind if (profile is not None and not network and not args.port) else "serial"
+    if kind != "serial":
+        # the printer profile's own link (link.kind, link.url, link.api_key_file)
+        setattr(args, kind, profile.link.url)
+        args.api_key_file = args.api_key_file or profile.link.api_key_file or None
+        network = [kind]
+        if state is not None:
+            raise ValueError("--resume works with the serial link (--port) only")
     if network:
         name, target = _network_links()[network[0]]
         link = make_link(target(args), profile=profile, job_path=job_path)

@@ -1,9 +1,10 @@
-"""Printer set-up: the printer (a preset or a profile file), how it is reached (a serial port or an
-OctoPrint server), a Test connection button, and the choices remembered for next time.
+"""Printer set-up: the printer (a preset or a profile file), how it is reached (a serial port, an
+OctoPrint server or a Klipper printer's Moonraker), a Test connection button, and the choices remembered
+for next time.
 
 Nothing is chosen for the user: the port list shows what serial.tools.list_ports
-finds, with descriptions, and starts on "Choose a port". The OctoPrint API key
-is pasted once; Save keeps it in the user's config folder with mode 600
+finds, with descriptions, and starts on "Choose a port". The OctoPrint (or
+Moonraker) API key is pasted once; Save keeps it in the user's config folder with mode 600
 (arapp.printing.connection_check) and the field then says it is stored. The
 choices (`printer` in arapp.user_config's state) are what `saved_choice()`
 returns; the print dialog reads them from there.
@@ -42,8 +43,8 @@ BAUDS = (115200, 250000, 230400, 57600, 500000, 1000000)
 
 
 def saved_choice() -> dict:
-    """The remembered printer set-up: {"profile": "preset:KEY" or a file path, "link": "serial" or
-    "octoprint", "port", "baud", "url"} ({} when never saved)."""
+    """The remembered printer set-up: {"profile": "preset:KEY" or a file path, "link": "serial",
+    "octoprint" or "moonraker", "port", "baud", "url"} ({} when never saved)."""
     value = user_config.recall(STATE_KEY, {})
     return value if isinstance(value, dict) else {}
 
@@ -103,16 +104,19 @@ class PrinterSetupDialog(QDialog):
         form.addRow("", row)
 
     def _add_link_choice_row(self, form: QFormLayout) -> None:
-        """The Connection row: USB / serial (checked at first) or OctoPrint, one of the two."""
+        """The Connection row: USB / serial (checked at first), OctoPrint or Klipper (Moonraker), one of them."""
         self.serial_radio = QRadioButton("USB / serial")
         self.octo_radio = QRadioButton("OctoPrint")
+        self.moonraker_radio = QRadioButton("Klipper (Moonraker)")
         group = QButtonGroup(self)
         group.addButton(self.serial_radio)
         group.addButton(self.octo_radio)
+        group.addButton(self.moonraker_radio)
         self.serial_radio.setChecked(True)
         row = QHBoxLayout()
         row.addWidget(self.serial_radio)
         row.addWidget(self.octo_radio)
+        row.addWidget(self.moonraker_radio)
         row.addStretch(1)
         form.addRow("Connection", row)
 
@@ -138,7 +142,7 @@ class PrinterSetupDialog(QDialog):
         return row
 
     def _add_octoprint_section(self, form: QFormLayout) -> None:
-        """The OctoPrint fields (shown with OctoPrint): the server's address and its API key (hidden text)."""
+        """The server fields (shown with OctoPrint or Moonraker): the address and its API key (hidden text)."""
         self.octo_box = QWidget()
         fields = QFormLayout(self.octo_box)
         fields.setContentsMargins(0, 0, 0, 0)
@@ -184,6 +188,7 @@ class PrinterSetupDialog(QDialog):
         buttons.accepted.connect(self.save)
         buttons.rejected.connect(self.reject)
         self.serial_radio.toggled.connect(self._link_changed)
+        self.moonraker_radio.toggled.connect(self._link_changed)
 
     def _start_from_saved_choice(self) -> None:
         """List the ports, restore the remembered choice, and show the fields and summary that go with it."""
@@ -250,19 +255,36 @@ class PrinterSetupDialog(QDialog):
             self.port.addItem(f"{device} - not found now", device)
         self.port.setCurrentIndex(self.port.findData(device))
 
+    def link_kind(self) -> str:
+        """"serial", "octoprint" or "moonraker": the Connection chosen."""
+        if self.serial_radio.isChecked():
+            return "serial"
+        return "moonraker" if self.moonraker_radio.isChecked() else "octoprint"
+
     def _link_changed(self, *_args) -> None:
-        serial = self.serial_radio.isChecked()
-        self.serial_box.setVisible(serial)
-        self.octo_box.setVisible(not serial)
+        kind = self.link_kind()
+        self.serial_box.setVisible(kind == "serial")
+        self.octo_box.setVisible(kind != "serial")
+        if kind == "moonraker":
+            self.url.setPlaceholderText("http://mainsailos.local")
+            self.key.setPlaceholderText("Moonraker's API key (none needed from its trusted_clients)")
+        else:
+            self.url.setPlaceholderText("http://octopi.local")
+            self.key.setPlaceholderText("paste the API key (OctoPrint: Settings > API)")
         self.result.setText("")
+        self._url_changed()
 
     def _url_changed(self) -> None:
         url = self.url.text().strip()
-        if url and not self.key.text() and cc.stored_octoprint_key(url):
+        kind = self.link_kind()
+        if url and kind != "serial" and not self.key.text() and cc.stored_key(kind, url):
             self.key.setPlaceholderText("stored (paste a new key to replace it)")
 
+    def _server_key(self) -> str:
+        return self.key.text().strip() or (cc.stored_key(self.link_kind(), self.url.text()) or "")
+
     def _octoprint_key(self) -> str:
-        return self.key.text().strip() or (cc.stored_octoprint_key(self.url.text()) or "")
+        return self._server_key()
 
     @property
     def testing(self) -> bool:
@@ -277,6 +299,9 @@ class PrinterSetupDialog(QDialog):
             port, baud = self.port.currentData(), self.baud.currentData()
             self.result.setText(f"Asking the printer on {port} (M115)..." if port else "")
             fn, args = cc.check_serial, (port, baud)
+        elif self.moonraker_radio.isChecked():
+            self.result.setText("Asking Moonraker...")
+            fn, args = cc.check_moonraker, (self.url.text(), self._server_key())
         else:
             self.result.setText("Asking OctoPrint...")
             fn, args = cc.check_octoprint, (self.url.text(), self._octoprint_key())
@@ -295,16 +320,16 @@ class PrinterSetupDialog(QDialog):
     # -- saving -----------------------------------------------------------------------------------
     def choice(self) -> dict:
         return {"profile": self.profile.currentData(),
-                "link": "serial" if self.serial_radio.isChecked() else "octoprint",
+                "link": self.link_kind(),
                 "port": self.port.currentData() or "", "baud": int(self.baud.currentData()),
                 "url": self.url.text().strip()}
 
     def save(self) -> None:
-        """Remember the choice; with OctoPrint and a pasted key, store the key (mode 600)."""
+        """Remember the choice; with OctoPrint or Moonraker and a pasted key, store the key (mode 600)."""
         choice = self.choice()
-        if choice["link"] == "octoprint" and self.key.text().strip():
+        if choice["link"] in ("octoprint", "moonraker") and self.key.text().strip():
             try:
-                cc.store_octoprint_key(choice["url"], self.key.text())
+                cc.store_key(choice["link"], choice["url"], self.key.text())
             except ApiKeyError as exc:
                 self.result.setText(f"Failed: {exc}")
                 return
@@ -324,6 +349,8 @@ class PrinterSetupDialog(QDialog):
             self.set_profile_file(profile)
         if c.get("link") == "octoprint":
             self.octo_radio.setChecked(True)
+        elif c.get("link") == "moonraker":
+            self.moonraker_radio.setChecked(True)
         if c.get("port"):
             self.set_port(c["port"])
         i = self.baud.findData(c.get("baud"))

@@ -7,8 +7,10 @@ Serial"); nothing is chosen for the user. `check_serial(port, baud)` opens the
 port, resets line numbers and asks M115 (SerialPrinter.connect), and reports
 the firmware name. `check_octoprint(url, key)` asks OctoPrint's REST API for
 its version (`GET /api/version`) and the printer's state (`GET
-/api/connection`). The API key travels in the X-Api-Key header only and is
-never part of a message; `store_octoprint_key` writes it with mode 600.
+/api/connection`). `check_moonraker(url, key)` asks Moonraker for its version
+and Klipper's state (the key is optional on a trusted LAN). The API key travels
+in the X-Api-Key header only and is never part of a message; `store_key` (and
+`store_octoprint_key`) writes it with mode 600 in the user's config folder.
 """
 
 from __future__ import annotations
@@ -21,7 +23,7 @@ import requests
 from serial.tools import list_ports as lp
 
 from arapp.printing.link.base import LinkError
-from arapp.printing.link.factory import OctoPrintTarget, SerialTarget
+from arapp.printing.link.factory import MoonrakerTarget, OctoPrintTarget, SerialTarget
 from arapp.printing.link.octoprint import ApiKeyError, load_api_key, save_api_key
 from arapp.printing.link.serial_link import SerialPrinter
 from arapp.printing.presets import preset_profile
@@ -108,8 +110,37 @@ def check_octoprint(url: str, api_key: str, timeout_s: float = 5.0) -> CheckResu
     return CheckResult(True, f"{version}: {printer}", {"version": version, "state": state, "port": port})
 
 
+def check_moonraker(url: str, api_key: str | None = None, timeout_s: float = 5.0) -> CheckResult:
+    """Ask Moonraker at `url` for its version and whether Klipper is ready (no key: a trusted client)."""
+    from arapp.printing.link.moonraker import check_moonraker as check
+
+    ok, summary, details = check(url, api_key or None, timeout_s)
+    return CheckResult(ok, summary, details)
+
+
+def key_path(kind: str, url: str) -> Path:
+    """Where the API key of the `kind` ("octoprint", "moonraker", ...) server at `url` is kept (mode 600)."""
+    return secret_path(f"{kind} {url.strip().rstrip('/')}")
+
+
+def store_key(kind: str, url: str, api_key: str) -> Path:
+    """Keep the key for the `kind` server at `url` in the user's config folder (mode 600); returns the file."""
+    return save_api_key(key_path(kind, url), api_key)
+
+
+def stored_key(kind: str, url: str) -> str | None:
+    """The key kept for the `kind` server at `url`, or None when there is none (or it is unusable)."""
+    path = key_path(kind, url)
+    if not path.exists():
+        return None
+    try:
+        return load_api_key(path)
+    except ApiKeyError:
+        return None
+
+
 def octoprint_key_path(url: str) -> Path:
-    return secret_path(f"octoprint {url.strip().rstrip('/')}")
+    return key_path("octoprint", url)
 
 
 def store_octoprint_key(url: str, api_key: str) -> Path:
@@ -129,12 +160,18 @@ def stored_octoprint_key(url: str) -> str | None:
 
 
 def saved_target(choice: dict):
-    """The printer-link target (arapp.printing.link.factory SerialTarget / OctoPrintTarget) of a saved
+    """The printer-link target (arapp.printing.link.factory SerialTarget / OctoPrintTarget / MoonrakerTarget) of a saved
     printer set-up (arapp.gui.printer_setup.saved_choice()), or None when it names no port or server.
     An OctoPrint target points at the stored key file."""
     if choice.get("link") == "octoprint":
         url = str(choice.get("url") or "").strip().rstrip("/")
         return OctoPrintTarget(url, str(octoprint_key_path(url))) if url else None
+    if choice.get("link") == "moonraker":
+        url = str(choice.get("url") or "").strip().rstrip("/")
+        if not url:
+            return None
+        path = key_path("moonraker", url)
+        return MoonrakerTarget(url, str(path) if path.exists() else "")
     port = str(choice.get("port") or "")
     return SerialTarget(port, int(choice.get("baud") or 115200)) if port else None
 

@@ -39,10 +39,14 @@ class BedSize:
 
 @dataclass(frozen=True)
 class LinkSettings:
-    """Default serial link of the printer."""
+    """How the printer is reached by default: `kind` "serial" (port, baud) or a server ("octoprint",
+    "moonraker") at `url`, its API key in `api_key_file` (mode 600; "" where the server needs none)."""
 
     port: str
     baud: int
+    kind: str = "serial"
+    url: str = ""
+    api_key_file: str = ""
 
 
 @dataclass
@@ -94,7 +98,9 @@ _RANGES = {
 DEFAULT_MAX_HOTEND = 300.0
 DEFAULT_MAX_BED = 120.0
 _BED = {"width": float, "depth": float, "height": float}
-_LINK = {"port": str, "baud": int}
+_LINK = {"port": str, "baud": int, "kind": str, "url": str, "api_key_file": str}
+LINK_KINDS = ("serial", "octoprint", "moonraker")
+_LINK_REQUIRED = ("port", "baud")
 _FLAVORS = ("marlin",)
 
 
@@ -165,13 +171,21 @@ def parse_profile(data: dict, source: str = "<profile>", defaults: dict | None =
     link_block.update(data.get("link", {}))
     for key in data.get("link", {}):
         if key not in _LINK:
-            raise ProfileError(f"{source}: link.{key}: unknown key; the link has port and baud")
+            raise ProfileError(f"{source}: link.{key}: unknown key; the link has {', '.join(_LINK)}")
     for key, typ in _LINK.items():
         if key not in link_block:
-            raise ProfileError(f"{source}: link.{key}: missing")
+            if key in _LINK_REQUIRED:
+                raise ProfileError(f"{source}: link.{key}: missing")
+            continue
         _check(link_block[key], typ, f"link.{key}", source)
     if link_block["baud"] <= 0:
         raise ProfileError(f"{source}: link.baud: must be positive, got {link_block['baud']}")
+    kind = link_block.get("kind", "serial")
+    if kind not in LINK_KINDS:
+        raise ProfileError(f"{source}: link.kind: {kind!r} is not a link kind; use one of {', '.join(LINK_KINDS)}")
+    if kind != "serial" and not str(link_block.get("url", "")).strip():
+        raise ProfileError(f"{source}: link.url: missing (a {kind} link needs the server's address, "
+                           "e.g. http://mainsailos.local)")
     merged["link"] = link_block
 
     if merged.get("flavor") not in _FLAVORS:
@@ -189,7 +203,9 @@ def parse_profile(data: dict, source: str = "<profile>", defaults: dict | None =
         flavor=merged["flavor"],
         start_gcode=merged["start_gcode"],
         end_gcode=merged["end_gcode"],
-        link=LinkSettings(port=link_block["port"], baud=int(link_block["baud"])),
+        link=LinkSettings(port=link_block["port"], baud=int(link_block["baud"]), kind=kind,
+                          url=str(link_block.get("url", "")).strip(),
+                          api_key_file=str(link_block.get("api_key_file", ""))),
         bed_anchor=anchor,
         bed_from_anchor=bed_from_anchor,
         source=source,
