@@ -56,4 +56,16 @@ def run(args):
         print(f"record: no --anchors: wrote the default anchor into {out / 'session.json'}: "
               f"{describe_anchors(session.anchors)} (what `arapp markers aruco` prints); if the video shows "
               "another, edit its anchors there or record again with --anchors anchors.json")
+    say_why_untracked(out, opened.default_anchors)
     return 0
+
+
+def say_why_untracked(folder, default_anchors: bool) -> None:
+    """A recording in which its anchors give no pose says why, and what it shows instead (arapp/untracked.py)."""
+    from tracking.session import load_session
+
+    from arapp.untracked import untracked_lines  # discovery's detectors: only loaded after a recording
+
+    session = load_session(folder)
+    for line in untracked_lines(session.video_path, session.anchors, default_anchors, camera=session.camera):
+        print(f"record: {line}")
