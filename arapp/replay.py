@@ -197,8 +197,8 @@ def terminal_progress(stream=sys.stderr) -> Callable[[int, int], None]:
 
     def show(done: int, total: int) -> None:
         if not tty:  # a log file gets a line every 10 %, not a carriage-return storm
-            step = int(10 * done / total) if total else 10
-            if step == shown[0] and done < total:
+            step = int(10 * done / total) if total else done // 100  # no frame count: every 100 frames
+            if step == shown[0] and (done < total or not total):
                 return
             shown[0] = step
         width = 30
@@ -206,8 +206,8 @@ def terminal_progress(stream=sys.stderr) -> Callable[[int, int], None]:
         bar = "#" * int(width * frac) + "." * (width - int(width * frac))
         fps = done / max(time.perf_counter() - start, 1e-9)
         lead = "\r" if tty else ""
-        stream.write(f"{lead}[{bar}] {done}/{total} frames  {fps:5.1f} fps")
-        if done >= total or not tty:
+        stream.write(f"{lead}[{bar}] {done}/{total or '?'} frames  {fps:5.1f} fps")
+        if (total and done >= total) or not tty:
             stream.write("\n")
         stream.flush()
 
