@@ -72,7 +72,10 @@ class V4L2Source(Source):
         self.granted = {"width": w, "height": h, "fps": self.fps, "fourcc": _fourcc_str(self._cap.get(cv2.CAP_PROP_FOURCC))}
         self.requested = {"width": width, "height": height, "fps": fps, "fourcc": fourcc}
         if calibration is not None:
-            cam = calibration if isinstance(calibration, Camera) else Camera.load_yaml(calibration)
+            if isinstance(calibration, Camera):
+                cam = calibration
+            else:  # a file without an image size is for the granted size (the note says so)
+                cam, self.notes = Camera.load_file(calibration, (w, h))
             self._camera = _fit_camera(cam, w, h, str(calibration), self.path)
         self.info = {"kind": "v4l2", "device": self.path, "name": _v4l2_name(self.path), **self.granted}
 
