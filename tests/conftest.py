@@ -7,6 +7,17 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 os.environ.setdefault("MPLBACKEND", "Agg")
 
+import atexit  # noqa: E402
+import shutil  # noqa: E402
+import tempfile  # noqa: E402
+
+# Each test process (the one process, or each pytest-xdist worker of `make test`) gets its own empty user
+# config folder: QSettings("arapp", "arapp") and platformdirs read XDG_CONFIG_HOME, so parallel workers never
+# share (or race on) an arapp.conf, no test sees what another left there, and the user's own stays untouched.
+_XDG_CONFIG = tempfile.mkdtemp(prefix="arapp-test-config-")
+os.environ["XDG_CONFIG_HOME"] = _XDG_CONFIG
+atexit.register(shutil.rmtree, _XDG_CONFIG, True)
+
 import pytest  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -204,6 +204,7 @@ def held_recording_folder(name: str):
     from pathlib import Path
 
     from arapp.exchange.staging import staged_folder
+    from cache_helpers import file_lock
     from tracking.synth import synthesize
     from tracking.synth.presets import preset
     from tracking.synth.scene import parse_scene
@@ -211,10 +212,10 @@ def held_recording_folder(name: str):
     data = preset(name)
     digest = hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
     folder = Path(__file__).resolve().parents[1] / "build" / "synth" / f"{name}-{digest}"
-    if not (folder / "groundtruth.tum").is_file():
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        with staged_folder(folder, replace=True) as tmp:   # a half-rendered recording is never left behind
-            synthesize(parse_scene(data, f"preset {name}"), tmp, force=True)
+    with file_lock(folder.parent / f"{folder.name}.lock"):   # parallel test workers (or a bench) render it once
+        if not (folder / "groundtruth.tum").is_file():
+            with staged_folder(folder, replace=True) as tmp:   # a half-rendered recording is never left behind
+                synthesize(parse_scene(data, f"preset {name}"), tmp, force=True)
     return folder
 
 

@@ -135,14 +135,12 @@ def test_registered_placement_leaves_the_mesh_where_it_is():
 
 
 def shared_vase_recording(tmp_path_factory):
-    """The synthetic scan recording both scan-mode test modules use, rendered once per test session: a
-    40-frame orbit, seed 5 (not the benchmark's scene: seed 7, 48 frames)."""
+    """The synthetic scan recording both scan-mode test modules use, rendered once per test run (shared by
+    the xdist workers): a 40-frame orbit, seed 5 (not the benchmark's scene: seed 7, 48 frames)."""
+    from cache_helpers import once_per_run
     from scan_scene import write_vase_recording
 
-    folder = tmp_path_factory.getbasetemp() / "scan_vase_40_seed5"
-    if not (folder / "session.json").exists():
-        write_vase_recording(folder, n_frames=40, seed=5)
-    return folder
+    return once_per_run(tmp_path_factory, "scan_vase_40_seed5", lambda d: write_vase_recording(d, n_frames=40, seed=5))
 
 
 @pytest.fixture(scope="module")
