@@ -23,14 +23,17 @@ import threading
 import time
 from pathlib import Path
 
+import numpy as np
+
 from arapp.app.events import Events
 from arapp.app.printers import resolve_profile
 from arapp.app.printlink import PrintEvent, start_job
 from arapp.app.runner import ImmediateRunner
 from arapp.app.saved_job import SavedJob, find_saved_job, load_saved_job, stop_text
-from arapp.app.toolpaths import preview_spec, summarize
+from arapp.app.toolpaths import bed_from_placement_mm, preview_spec, summarize
 from arapp.placement import Placement, placement_from_any
 from arapp.printing import SliceCancelled, placed_solid, slice_mesh
+from arapp.printing.export import drop_on_bed
 from arapp.printing.gcode import parse_gcode
 from arapp.printing.link import JobState
 from arapp.printing.prusa import slice_with_prusa
@@ -61,14 +64,18 @@ def slice_job(model, matrix, settings, profile, profile_name: str, job_gcode: Pa
               slicer: str = "built-in"):
     """Worker thread: the placed solid sliced by `slicer` (a SLICERS name); the G-code written to
     `job_gcode` (the copy the preview and the printer job read) with its summary. Returns (result, gcode
-    path, summary, profile, name)."""
-    solid = placed_solid(model, matrix, profile=profile)
+    path, summary, profile, name, bed_from_placement: the 4x4 (mm) the slicer moved the placed part by)."""
+    here = placed_solid(model, matrix, profile=profile, center=False)  # x, y as placed; lowest point at z = 0
+    solid = drop_on_bed(here, profile)  # centred on the bed, as placed_solid does by default
     result = SLICERS[slicer](solid, settings, profile, progress=progress, cancel=cancel)
+    v = np.asarray(model.mesh().vertices, float) @ np.asarray(matrix, float)[:3, :3].T + np.asarray(matrix, float)[:3, 3]
+    sliced = result.mesh if getattr(result, "mesh", None) is not None and abs(result.scale - 1) < 1e-9 else solid
+    bed_from_placement = bed_from_placement_mm(here.bounds, sliced.bounds, float(v[:, 2].min()))
     job_gcode.parent.mkdir(parents=True, exist_ok=True)
     job_gcode.write_text(result.gcode)
     prune_slices(job_gcode.parent)
     summary = summarize(parse_gcode(result.gcode), profile.bed)
-    return result, str(job_gcode), summary, profile, profile_name
+    return result, str(job_gcode), summary, profile, profile_name, bed_from_placement
 
 
 class PrintSession:
@@ -88,6 +95,7 @@ class PrintSession:
         self.summary = None  # arapp.app.toolpaths.PreviewSummary of the sliced G-code
         self.profile = None  # the PrinterProfile sliced for
         self.sliced_profile: str | None = None  # its name or path
+        self.bed_from_placement = None  # 4x4 (mm): the slicer's move of the placed part onto the bed
         self.job = None  # arapp.app.printlink.PrintJob while printing
         self.current_layer = -1  # the layer being printed, from the link's reports
         self.last_progress = None
@@ -157,7 +165,8 @@ class PrintSession:
             self._slice_task.cancel.set()
 
     def _slice_done(self, done) -> None:
-        self.result, self.job_gcode_path, self.summary, self.profile, self.sliced_profile = done
+        (self.result, self.job_gcode_path, self.summary, self.profile, self.sliced_profile,
+         self.bed_from_placement) = done
         self.events.sliced.emit(self.result)
         if self.preview_on:
             self.emit_preview()
@@ -183,9 +192,9 @@ class PrintSession:
     # -- the print preview on the bed ------------------------------------------------------
     @property
     def preview_possible(self) -> bool:
-        """Sliced for a profile with a bed anchor (docs/printer-profile.md): the toolpaths can be placed."""
+        """Sliced: the toolpaths can be shown, on the bed marker or where the model is placed."""
         return (self.summary is not None and self.summary.layers > 0 and self.profile is not None
-                and self.profile.bed_from_anchor is not None)
+                and (self.bed_from_placement is not None or self.profile.bed_from_anchor is not None))
 
     def set_preview(self, on: bool, layer: int | None = None) -> None:
         """Show (or hide) the toolpaths on the bed, up to `layer` (0-based; None: all layers)."""
@@ -199,7 +208,8 @@ class PrintSession:
         if self.job_gcode_path is None:
             return
         current = self.current_layer if (self.job is not None and self.current_layer >= 0) else None
-        self._set_preview(preview_spec(self.job_gcode_path, self.sliced_profile, self.preview_layer, current))
+        self._set_preview(preview_spec(self.job_gcode_path, self.sliced_profile, self.preview_layer, current,
+                                       bed_from_placement=self.bed_from_placement))
 
     def _set_preview(self, spec: dict | None) -> None:
         self.preview_gen += 1

@@ -1,7 +1,8 @@
 """The AR print preview in the live view: sliced toolpaths on the printer bed, built where the pipeline runs.
 
 A preview request ("spec") is a small dict that crosses the process boundary:
-`{"gcode": PATH, "printer": PROFILE, "layer": N | None, "current": N | None, "gen": int}`.
+`{"gcode": PATH, "printer": PROFILE, "layer": N | None, "current": N | None, "gen": int,
+"bed_from_placement": 4x4 | None}`.
 `layer` None shows every layer; N shows layers 0..N with N in full colour and
 those below dimmed. `current` is the layer being printed (from the printer
 link's progress reports): it is drawn highlighted, with the layers below
@@ -10,8 +11,14 @@ rule); it takes precedence over `layer`.
 
 `ToolpathStage` parses the G-code (once per file version), builds the line
 sets in its own thread (newest request wins, so a layer slider dragged fast
-never queues work) and hands them to the pipeline thread between frames. The
-bed anchor is the session's first anchor (docs/printer-profile.md).
+never queues work) and hands them to the pipeline thread between frames.
+
+Where the toolpaths stand: on the printer's bed marker when the printer
+profile names one (docs/printer-profile.md) and that marker is one of the
+session's anchors (the camera tracks it); otherwise where the model is
+placed, through `bed_from_placement` (the slicer's move of the placed part
+onto the bed, `bed_from_placement_mm`). The info says which
+(`placed_by`: "bed marker" or "model", and `placed_text` in words).
 """
 
 from __future__ import annotations
@@ -25,16 +32,68 @@ from typing import Any, Callable
 import numpy as np
 
 from arapp.app.printers import resolve_profile
+from arapp.placement import world_from_placement
 from arapp.printing.gcode import parse_gcode
 from arapp.toolpath_overlay import OUT_OF_BED_COLOUR, out_of_bed, toolpath_line_sets, world_from_bed
 
+# the fields that name a marker (or board, or QR code): equal on two anchors, they are the same one
+_MARKER_FIELDS = ("kind", "dictionary", "id", "first_id", "markers_x", "markers_y", "squares_x", "squares_y", "text")
+
 
 def preview_spec(gcode: str, printer: str | None, layer: int | None = None, current: int | None = None,
-                 gen: int = 0) -> dict:
-    """A preview request (see the module doc); paths as strings, layers 0-based."""
+                 gen: int = 0, bed_from_placement=None) -> dict:
+    """A preview request (see the module doc); paths as strings, layers 0-based, `bed_from_placement` a 4x4
+    (mm) or None."""
     return {"gcode": str(gcode), "printer": None if printer is None else str(printer),
             "layer": None if layer is None else int(layer),
-            "current": None if current is None or current < 0 else int(current), "gen": int(gen)}
+            "current": None if current is None or current < 0 else int(current), "gen": int(gen),
+            "bed_from_placement": None if bed_from_placement is None
+            else np.asarray(bed_from_placement, float).tolist()}
+
+
+def bed_from_placement_mm(placed_bounds: np.ndarray, bed_bounds: np.ndarray, lowest_z: float) -> np.ndarray:
+    """4x4 (mm) from the anchor's placement frame to the bed frame, as the slicer moved the part: the placed
+    solid's box (`placed_bounds`, (2, 3): x, y in the placement frame) centred where the sliced part's box
+    lies on the bed (`bed_bounds`), its lowest point (`lowest_z`, placement frame) onto z = 0."""
+    T = np.eye(4)
+    T[:2, 3] = (np.asarray(bed_bounds, float)[:, :2].mean(axis=0) - np.asarray(placed_bounds, float)[:, :2].mean(axis=0))
+    T[2, 3] = -float(lowest_z)
+    return T
+
+
+def same_marker(a, b) -> bool:
+    """Two AnchorSpecs name the same marker (kind, dictionary, ids; sizes may differ in rounding)."""
+    return all(getattr(a, f, None) == getattr(b, f, None) for f in _MARKER_FIELDS)
+
+
+def marker_text(anchor) -> str:
+    """'ArUco DICT_4X4_50 #42' and the like, for people."""
+    if anchor.kind == "aruco":
+        return f"ArUco {anchor.dictionary} #{anchor.id}"
+    if anchor.kind == "qr":
+        return f"QR code {anchor.text!r}"
+    return f"{anchor.kind} {anchor.dictionary or ''} from #{anchor.first_id}".replace("  ", " ")
+
+
+def place_toolpaths(anchors: list, profile, bed_from_placement) -> tuple[np.ndarray, str, str]:
+    """(world_from_bed, placed_by, placed_text): on the profile's bed marker when one of `anchors` is it,
+    else where the model is placed on the session's first anchor (bed_from_placement, mm). ValueError when
+    neither can be done."""
+    bed = getattr(profile, "bed_anchor", None)
+    if bed is not None and profile.bed_from_anchor is not None:
+        for anchor in anchors:
+            if same_marker(anchor, bed):
+                return (world_from_bed(anchor.world_from_anchor, profile.bed_from_anchor), "bed marker",
+                        f"on the printer's bed, placed by its bed marker {marker_text(bed)} "
+                        f"(printer profile {profile.name})")
+    if bed_from_placement is None:
+        raise ValueError("print preview: the printer profile has no bed marker in view and the slice does not "
+                         "say where the model was placed; slice again")
+    why = (f"the printer's bed marker {marker_text(bed)} is not among the markers tracked" if bed is not None
+           else "no bed marker is set up for this printer (Printer set-up > Bed marker...)")
+    placement_from_bed = np.linalg.inv(np.asarray(bed_from_placement, float))
+    T = world_from_placement(anchors[0]) @ np.diag([1e-3, 1e-3, 1e-3, 1.0]) @ placement_from_bed
+    return T, "model", f"where the model is placed ({why})"
 
 
 @dataclass
@@ -107,16 +166,12 @@ class ToolpathBuilder:
         hit = self._profiles.get(key)
         if hit is None or hit[0] != version:
             profile = resolve_profile(printer)
-            if profile.bed_from_anchor is None:
-                raise ValueError(f"printer profile {profile.source} has no bed_anchor; add one with its "
-                                 "bed_from_anchor (docs/printer-profile.md, or 'arapp printer bed-anchor') so the toolpaths "
-                                 "can be placed on the bed")
             hit = self._profiles[key] = (version, profile)
         return hit[1]
 
-    def build(self, spec: dict) -> tuple[list, np.ndarray, dict]:
-        """(line_sets in bed mm, bed_from_anchor_mm, info) for a spec. info: gen, layers, layer, current,
-        outside (bool: moves drawn red)."""
+    def build(self, spec: dict) -> tuple[list, Any, dict]:
+        """(line_sets in bed mm, the printer profile, info) for a spec. info: gen, layers, layer, current,
+        outside (bool: moves drawn red), z."""
         layers = self.layers(spec["gcode"])
         profile = self.profile(spec.get("printer"))
         bed = (profile.bed.width, profile.bed.depth, profile.bed.height)
@@ -135,7 +190,7 @@ class ToolpathBuilder:
         outside = any(tuple(s.rgba) == tuple(OUT_OF_BED_COLOUR) for s in sets)
         info = {"gen": int(spec.get("gen", 0)), "layers": n, "layer": layer, "current": current,
                 "outside": bool(outside), "z": float(layers[layer].z) if layer is not None else None}
-        return sets, np.asarray(profile.bed_from_anchor, float), info
+        return sets, profile, info
 
 
 class ToolpathStage:
@@ -180,19 +235,26 @@ class ToolpathStage:
                 self.submit(lambda pipe, g=spec["gen"]: self._clear(pipe, g))
                 continue
             try:
-                sets, bed_from_anchor, info = self.builder.build(spec)
+                sets, profile, info = self.builder.build(spec)
             except (ValueError, OSError) as exc:
                 self.on_error("Cannot show the print preview", str(exc))
                 continue
             except Exception as exc:  # noqa: BLE001 - a bug here must not end the live view
                 self.on_error("Cannot show the print preview", f"{exc}\n{traceback.format_exc(limit=3)}")
                 continue
-            self.submit(lambda pipe, s=sets, b=bed_from_anchor, i=info: self._apply(pipe, s, b, i))
+            b = spec.get("bed_from_placement")
+            self.submit(lambda pipe, s=sets, p=profile, b=b, i=info: self._apply(pipe, s, p, b, i))
 
-    def _apply(self, pipe, sets, bed_from_anchor, info) -> None:
-        pipe.set_toolpaths(sets, world_from_bed(pipe.anchors[0].world_from_anchor, bed_from_anchor))
-        self.on_info(info)
+    def _apply(self, pipe, sets, profile, bed_from_placement, info) -> None:
+        try:
+            T, by, text = place_toolpaths(pipe.anchors, profile, bed_from_placement)
+        except ValueError as exc:
+            self.on_error("Cannot show the print preview", str(exc))
+            return
+        pipe.set_toolpaths(sets, T)
+        self.on_info({**info, "placed_by": by, "placed_text": text})
 
     def _clear(self, pipe, gen: int) -> None:
         pipe.toolpaths = None  # Pipeline has no clear method; None is its "no toolpaths" state
-        self.on_info({"gen": gen, "layers": 0, "layer": None, "current": None, "outside": False, "z": None})
+        self.on_info({"gen": gen, "layers": 0, "layer": None, "current": None, "outside": False, "z": None,
+                      "placed_by": None, "placed_text": ""})

@@ -60,9 +60,6 @@ class BedPreviewPart:
         n = ps.summary.layers if ps.summary is not None else 0
         self._set_slider(n, maximum=max(0, n))  # 0..n-1: one layer; n: all layers
         warnings = [w for w in ([ps.summary.warning(ps.profile.bed)] if ps.summary is not None else []) if w]
-        if ps.profile.bed_from_anchor is None:
-            warnings.append(f"The printer profile {ps.profile.source} has no bed anchor: the preview cannot be "
-                            "placed on the bed (add bed_anchor to the profile, see docs/printer-profile.md).")
         self.preview_warning.setText("\n".join(warnings))
         self.preview_warning.setVisible(bool(warnings))
         self.preview_check.setEnabled(ps.preview_possible)
@@ -107,7 +104,13 @@ class BedPreviewPart:
             self.session.emit_preview()
 
     def preview_shown(self, info: dict) -> None:
-        """The live view drew the preview `info` (arapp.app.toolpaths)."""
+        """The live view drew the preview `info` (arapp.app.toolpaths): say where it stands, warn when it
+        leaves the build area."""
+        if info.get("placed_text"):
+            self.placement_note.setText(f"The toolpaths are drawn {info['placed_text']}.")
+            self.placement_note.setVisible(True)
+        elif not info.get("layers"):
+            self.placement_note.setVisible(False)
         if info.get("outside") and not self.preview_warning.isVisible():
             self.preview_warning.setText("Toolpaths leave the build area (drawn red on the bed).")
             self.preview_warning.setVisible(True)

@@ -91,6 +91,10 @@ def preview_box(dlg) -> QGroupBox:
     dlg.ghost_note.setVisible(False)
     dlg.preview_check.toggled.connect(dlg.ghost_note.setVisible)
     pf.addWidget(dlg.ghost_note)
+    dlg.placement_note = QLabel("")  # where the toolpaths stand: on the bed marker, or where the model is
+    dlg.placement_note.setWordWrap(True)
+    dlg.placement_note.setVisible(False)
+    pf.addWidget(dlg.placement_note)
     lrow = QHBoxLayout()
     dlg.layer_slider = QSlider(Qt.Orientation.Horizontal)
     dlg.layer_slider.setRange(0, 0)
