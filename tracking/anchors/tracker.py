@@ -99,6 +99,9 @@ class AnchorTracker:
     frame, the cover's weight relaxes back to 1 with this time constant (seconds; `_cover_relax`).
     A pose on a lone marker's four corners also tells the filter their centre: the orbit mode about it,
     which such a pose shows worst, gets its own gain there (filter.py).
+    hold_sigmas: the filtered pose never projects the anchor points it rests on further than this many
+    times the measurement's pixel noise from where the frame's own solution does (`_hold_to_corners`; the
+    filter's lag behind an accelerating camera or anchor); 0 turns the hold off.
     """
 
     def __init__(self, anchors: list[AnchorSpec], camera: Camera, filter: bool = True, *, roi: bool = True,
@@ -106,7 +109,7 @@ class AnchorTracker:
                  branch_switch: float = 6.0, smear_px: float = 10.0, smear_sharpness: float = 0.15,
                  cover_fraction: float = 0.2, cover_weight: float = 0.1, refit_weight: float = 0.3,
                  new_anchor_gate: float = 0.5, unblur_px: float | None = 2.0, lone_end_margin: float = 0.1,
-                 cover_relax_s: float = 0.2, **filter_params):
+                 cover_relax_s: float = 0.2, hold_sigmas: float = 2.0, **filter_params):
         if not anchors:
             raise ValueError("AnchorTracker needs at least one anchor (the session's anchors list is empty)")
         self.anchors = list(anchors)
@@ -127,6 +130,8 @@ class AnchorTracker:
         self.lone_end_margin = float(lone_end_margin)
         self.aruco.lone_end_margin = self.lone_end_margin
         self.cover_relax_s = float(cover_relax_s)
+        self.hold_sigmas = float(hold_sigmas)
+        self.hold_rank_ratio = 0.1   # pose directions the corners show less than this (of the best) are not corrected
         self.cover_max_markers = 2
         self.cover_refit = True   # refit a covered lone marker's corners on its sides' uncovered parts
         self.refitted = 0         # markers so refitted this session (diagnostics, tests)
@@ -298,6 +303,7 @@ class AnchorTracker:
             # far worse than the rest: the filter gives that mode its own, lower gain (filter.py)
             centre = np.mean(sol.world, axis=0) if n <= 4 else None
             filt = self.filter.update(raw, t, depth, sigma, weight=weight, centre=centre)
+            filt = self._hold_to_corners(filt, raw, sol.world, px_sigma / max(weight, 1e-3))
             # (a restart leaves the state on this measurement alone; a down-weighted one counts as noisier)
             self._state_sigma = (sigma if self.filter.n == 0
                                  else min(self._state_sigma, sigma / max(weight, 1e-3)))
@@ -319,6 +325,38 @@ class AnchorTracker:
         res.rejected = rejected
         res.ms = (time.perf_counter() - t0) * 1000.0
         return res
+
+    def _hold_to_corners(self, filt: np.ndarray, raw: np.ndarray, world: np.ndarray, px_sigma: float) -> np.ndarray:
+        """The filtered pose `filt` (world_from_camera), corrected just enough that the anchor points it rests
+        on (`world`, N,3) project within `hold_sigmas` times the measurement's pixel noise `px_sigma` of
+        where this frame's own solution `raw` projects them (further when the measurement was down-weighted:
+        the caller divides `px_sigma` by its weight).
+
+        A constant-velocity filter lags behind any acceleration by (1 - alpha) / beta times it, and its
+        velocity gain is kept low so one noisy frame cannot fling the prediction: on a marker turned by
+        hand the filtered pose drew the marker's own corners half a pixel to pixels from where they were
+        seen, frame after frame. The correction is the least-squares pose change for the part of the
+        corners' offset beyond that bound, in the pose directions the corners pin (a truncated SVD of the
+        projection's Jacobian, translation counted as the angle it subtends): what the filter removes and
+        the corners cannot see (a lone marker's tilt) stays removed. The filter's own state is left as it is."""
+        if not self.filter_enabled or self.hold_sigmas <= 0 or len(world) < 3:
+            return filt
+        tau = self.hold_sigmas * px_sigma
+        target = project_pixels(self.camera, invert(raw), world)
+        cfw = invert(filt)
+        for _ in range(2):
+            now = project_pixels(self.camera, cfw, world)
+            r = target - now
+            dev = float(row_norms(r).max())
+            if not dev > 1.02 * tau:
+                break
+            depth = max(float(median((world @ cfw[:3, :3].T + cfw[:3, 3])[:, 2])), 1e-3)
+            J = _pose_jacobian(self.camera, cfw, world, now, depth)
+            U, S, Vt = np.linalg.svd(J, full_matrices=False)
+            keep = S >= self.hold_rank_ratio * S[0]
+            delta = Vt[keep].T @ ((U[:, keep].T @ ((1.0 - tau / dev) * r.ravel())) / S[keep])
+            cfw = _perturb(cfw, delta, depth)
+        return invert(cfw)
 
     def _unstretch(self, obs: list[Observation], sol):
         """The solution refitted together with motion blur's stretch of the markers (blur.py), when five or
@@ -573,6 +611,25 @@ class AnchorTracker:
         """Plain-language reasons why the anchors are not (or badly) found in this image; [] when all is well."""
         from tracking.anchors.diagnose import diagnose
         return diagnose(self.anchors, self.camera, image)
+
+
+def _perturb(cfw: np.ndarray, delta: np.ndarray, depth: float) -> np.ndarray:
+    """camera_from_world moved by delta = (rotation vector, translation / depth) in the camera frame."""
+    out = cfw.copy()
+    dR = cv2.Rodrigues(np.asarray(delta[:3], np.float64).reshape(3, 1))[0]
+    out[:3, :3] = dR @ cfw[:3, :3]
+    out[:3, 3] = dR @ cfw[:3, 3] + np.asarray(delta[3:]) * depth
+    return out
+
+
+def _pose_jacobian(camera: Camera, cfw: np.ndarray, world: np.ndarray, px: np.ndarray, depth: float) -> np.ndarray:
+    """(2N, 6) pixels per unit of `_perturb`'s delta, by forward differences (1e-6)."""
+    J = np.empty((2 * len(world), 6))
+    for k in range(6):
+        d = np.zeros(6)
+        d[k] = 1e-6
+        J[:, k] = ((project_pixels(camera, _perturb(cfw, d, depth), world) - px) / 1e-6).ravel()
+    return J
 
 
 # ----------------------------------------------------------------------------------------------------
