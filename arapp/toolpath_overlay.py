@@ -65,35 +65,64 @@ def toolpath_line_sets(layers, bed_size: tuple[float, float, float], layer: int 
 
     layer: show layers 0..layer with that layer in full colour and those below
     dimmed (None: all layers in full colour). current: the layer being
-    printed, drawn in `CURRENT_COLOUR` (takes precedence). Moves outside the
-    build volume are drawn red and the bed outline turns red: the warning.
-    Segments are grouped by kind and role so a whole print is a handful of
-    line sets (each uploaded to the GPU once).
+    printed (takes precedence over `layer`): the layers below it, printed
+    already, are drawn solid (full colour, opaque), the current one in
+    `CURRENT_COLOUR`, the layers still to print dimmed above it. Moves
+    outside the build volume are drawn red and the bed outline turns red: the
+    warning. Segments are grouped by kind and role so a whole print is a
+    handful of line sets (each uploaded to the GPU once); a group spanning
+    several layers keeps them in order with their starts (LineSet.layer_starts),
+    so the renderer can leave out layers that would sit closer than a line's
+    width on screen.
     """
     width, depth, height = bed_size
-    top = len(layers) - 1 if layer is None else min(int(layer), len(layers) - 1)
-    groups: dict[tuple, list] = {}  # (colour, width_px) -> list of (N, 2, 3) segment arrays
+    n = len(layers)
+    if current is not None:
+        current = min(int(current), n - 1)
+        top = n - 1
+    else:
+        top = n - 1 if layer is None else min(int(layer), n - 1)
+    groups: dict[tuple, list] = {}  # (colour, width_px) -> list of (layer index, (N, 2, 3) segments)
     for gl in layers[: top + 1]:
-        full = layer is None or gl.index == top
+        if current is not None:
+            role = "current" if gl.index == current else ("printed" if gl.index < current else "to print")
+            full = role != "to print"
+        else:
+            role = "full" if (layer is None or gl.index == top) else "below"
+            full = role == "full"
         for kind, rgba in KIND_COLOURS.items():
-            if kind == "travel" and (not travel or not full):
+            if kind == "travel" and (not travel or role not in ("full", "current")):
                 continue
             seg = gl.segments(kinds=(kind,), extruding=kind != "travel")
             if not len(seg):
                 continue
             outside = out_of_bed(seg, width, depth, height)
             colour = tuple(rgba) if full else (*rgba[:3], rgba[3] * DIM_ALPHA)
-            if current is not None and gl.index == current and kind != "travel":
+            if role == "current" and kind != "travel":
                 colour = CURRENT_COLOUR
             width_px = 1.0 if kind == "travel" else (2.0 if full else 1.0)
-            groups.setdefault((colour, width_px), []).append(seg[~outside])
+            if role == "current" and kind != "travel":
+                width_px = 3.0
+            groups.setdefault((colour, width_px), []).append((gl.index, seg[~outside]))
             if outside.any():
-                groups.setdefault((OUT_OF_BED_COLOUR, 3.0), []).append(seg[outside])
+                groups.setdefault((OUT_OF_BED_COLOUR, 3.0), []).append((gl.index, seg[outside]))
+    zs = [float(gl.z) for gl in layers]
+    pitch = (zs[-1] - zs[0]) / (n - 1) if n > 1 else 0.0
     sets = []
     for (colour, width_px), parts in groups.items():
-        seg = np.concatenate(parts)
-        if len(seg):
-            sets.append(LineSet(seg, colour, width_px, 0.0))
+        parts = [(k, p) for k, p in parts if len(p)]
+        if not parts:
+            continue
+        seg = np.concatenate([p for _, p in parts])
+        starts, seen, at = [], set(), 0
+        for k, p in parts:  # layers in order (the loop above walks them bottom up)
+            if k not in seen:
+                seen.add(k)
+                starts.append(at)
+            at += len(p)
+        stack = len(starts) > 1 and pitch > 0
+        sets.append(LineSet(seg, colour, width_px, 0.0, layer_starts=np.array(starts) if stack else None,
+                            layer_pitch=pitch if stack else 0.0))
     any_outside = (OUT_OF_BED_COLOUR, 3.0) in groups
     outline_colour = OUT_OF_BED_COLOUR if any_outside else BED_OUTLINE_COLOUR
     sets.append(LineSet([bed_outline(width, depth)], outline_colour, 3.0 if any_outside else 2.0, 0.0))
@@ -149,7 +178,8 @@ class PrintProgressOverlay:
         return True
 
     def line_sets(self) -> list:
-        """Layers printed so far dimmed, the current one highlighted (all layers before the print starts)."""
+        """Layers printed so far solid, the current one highlighted, those to print dimmed (all layers in
+        full colour before the print starts)."""
         if self._sets is None:
             if self.current < 0:
                 self._sets = toolpath_line_sets(self.layers, self.bed_size)

@@ -5,9 +5,10 @@ A preview request ("spec") is a small dict that crosses the process boundary:
 "bed_from_placement": 4x4 | None}`.
 `layer` None shows every layer; N shows layers 0..N with N in full colour and
 those below dimmed. `current` is the layer being printed (from the printer
-link's progress reports): it is drawn highlighted, with the layers below
-dimmed and those above hidden (arapp.toolpath_overlay.PrintProgressOverlay's
-rule); it takes precedence over `layer`.
+link's progress reports): it is drawn highlighted, the layers below it
+(printed) solid and those above it (still to print) dimmed
+(arapp.toolpath_overlay.toolpath_line_sets' rule); it takes precedence over
+`layer`.
 
 `ToolpathStage` parses the G-code (once per file version), builds the line
 sets in its own thread (newest request wins, so a layer slider dragged fast

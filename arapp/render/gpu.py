@@ -49,6 +49,13 @@ class Buffer:
         else:
             GL.glDrawArrays(primitive, 0, self.count)
 
+    def draw_ranges(self, primitive, firsts: np.ndarray, counts: np.ndarray):
+        """Draw only the vertex ranges [first, first + count) (no index buffer)."""
+        GL = self.GL
+        GL.glBindVertexArray(self.vao)
+        GL.glMultiDrawArrays(primitive, np.ascontiguousarray(firsts, np.int32),
+                             np.ascontiguousarray(counts, np.int32), len(firsts))
+
     def delete(self):
         GL = self.GL
         GL.glDeleteVertexArrays(1, [self.vao])

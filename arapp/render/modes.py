@@ -61,6 +61,11 @@ class LineSet:
     rgba: tuple = ISOLINE_COLOR
     width_px: float = 2.0
     hidden_alpha: float = 0.3
+    # a stack of layers (toolpaths): segment index where each layer begins (ascending), and the distance
+    # between layers (model units). The renderer then draws every k-th layer (and always the top one) when
+    # k layers fit in `LAYER_PX_PER_WIDTH * width_px` pixels at the stack's nearest point: the same picture.
+    layer_starts: np.ndarray | None = None
+    layer_pitch: float = 0.0
     _segments: np.ndarray | None = field(default=None, init=False, repr=False)
 
     def __post_init__(self):
@@ -76,6 +81,28 @@ class LineSet:
         if self._segments is None:
             self._segments = polylines_to_segments(self.polylines)
         return self._segments
+
+
+LAYER_PX_PER_WIDTH = 0.5  # layers closer than half a line's width on screen: only every k-th drawn
+
+
+def layer_stride(pitch_px: float, width_px: float) -> int:
+    """How many layers of a stack each drawn layer stands for: layers `pitch_px` apart on screen, lines
+    `width_px` wide, drawn so that the drawn ones stay at most LAYER_PX_PER_WIDTH * width_px apart."""
+    if not pitch_px > 0:
+        return 1
+    return max(1, int(LAYER_PX_PER_WIDTH * width_px / pitch_px))
+
+
+def layer_ranges(starts: np.ndarray, total: int, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """(firsts, counts) in vertices (2 per segment) of every `stride`-th layer counted down from the top one
+    (which is always drawn); neighbouring layers merged into one range."""
+    starts = np.asarray(starts, np.int64)
+    ends = np.append(starts[1:], total)
+    keep = np.arange(len(starts))[::-1][::max(1, int(stride))][::-1]
+    if stride <= 1:
+        return np.array([2 * starts[0]], np.int32), np.array([2 * (total - starts[0])], np.int32)
+    return (2 * starts[keep]).astype(np.int32), (2 * (ends[keep] - starts[keep])).astype(np.int32)
 
 
 def as_line_set(item, default_rgba=ISOLINE_COLOR, default_width=2.0) -> LineSet:

@@ -491,7 +491,7 @@ class OverlayRenderer:
             cull = self.cull and gmesh.closed and bool(hull_z.min() > near)
             self._draw_surface(gmesh, MV, mv32, p32, rgba, modes.SURFACE_ALPHA[mode] * rgba[3], cull)
         if line_items:
-            self._draw_lines(line_items, mv32, p32, (sw, sh), near, (w, h))
+            self._draw_lines(line_items, mv32, p32, (sw, sh), near, (w, h), self._stack_ranges(line_items, T, near))
 
         # 4. read back (resolve MSAA first)
         if self._resolve is not None:
@@ -549,7 +549,23 @@ class OverlayRenderer:
         GL.glDisable(GL.GL_POLYGON_OFFSET_FILL)
         GL.glDisable(GL.GL_CULL_FACE)
 
-    def _draw_lines(self, items, mv32, p32, size, near, size_out):
+    def _stack_ranges(self, items, T, near) -> dict:
+        """{id(LineSet): (firsts, counts)} for the layer stacks (LineSet.layer_starts) of which only every k-th
+        layer is needed at this pose: layers nearer on screen than modes.layer_stride allows look the same."""
+        out = {}
+        scale = float(np.cbrt(abs(np.linalg.det(T[:3, :3])))) or 1.0
+        f = float(min(self.K[0, 0], self.K[1, 1]))
+        for ls, g in items:
+            if ls.layer_starts is None or not ls.layer_pitch > 0 or g.buffer is None or len(ls.layer_starts) < 2:
+                continue
+            z = box_corners(g.lo, g.hi) @ T[2, :3] + T[2, 3]
+            pitch_px = ls.layer_pitch * scale * f / max(float(z.min()), near)
+            stride = modes.layer_stride(pitch_px, ls.width_px)
+            if stride > 1:
+                out[id(ls)] = modes.layer_ranges(ls.layer_starts, g.buffer.count // 2, stride)
+        return out
+
+    def _draw_lines(self, items, mv32, p32, size, near, size_out, ranges=None):
         GL = self.GL
         prog, u = self._line_prog
         GL.glUseProgram(prog)
@@ -567,7 +583,11 @@ class OverlayRenderer:
                     continue
                 GL.glUniform4f(u["u_color"], ls.rgba[0] * a, ls.rgba[1] * a, ls.rgba[2] * a, a)
                 GL.glUniform1f(u["u_width"], ls.width_px * size[0] / size_out[0])
-                g.buffer.draw(GL.GL_LINES)
+                r = (ranges or {}).get(id(ls))
+                if r is None:
+                    g.buffer.draw(GL.GL_LINES)
+                else:
+                    g.buffer.draw_ranges(GL.GL_LINES, *r)
             GL.glDepthMask(GL.GL_TRUE)
 
         # parts behind the surface first (dimmed), then the visible parts, which also occlude each other
