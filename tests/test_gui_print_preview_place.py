@@ -65,13 +65,17 @@ def test_preview_without_bed_marker_stands_on_the_model(qtbot, window, tmp_path)
     assert dlg.preview_check.isEnabled()  # no bed marker: still previewed, on the model
     dlg.preview_check.setChecked(True)
     qtbot.waitUntil(lambda: (window.toolpaths_info or {}).get("gen") == window.toolpaths_gen
-                    and window.last_shown.result.extra.get("toolpaths", {}).get("gen") == window.toolpaths_gen,
+                    and (window.last_shown.result.extra.get("toolpaths") or {}).get("gen") == window.toolpaths_gen,
                     timeout=TIMEOUT_MS)
     info = window.toolpaths_info
     assert info["placed_by"] == "model" and "no bed marker" in info["placed_text"]
     assert dlg.placement_note.isVisible() and "where the model is placed" in dlg.placement_note.text()
     window.session.pause()
     qtbot.wait(300)
+    # the paused frame: posed, with this preview drawn on it
+    qtbot.waitUntil(lambda: window.last_shown.result.world_from_camera is not None
+                    and (window.last_shown.result.extra.get("toolpaths") or {}).get("gen") == window.toolpaths_gen,
+                    timeout=TIMEOUT_MS)
     shown = window.last_shown
     img = shown.result.image.astype(int)
     orange = np.array(KIND_COLOURS["perimeter"][2::-1]) * 255

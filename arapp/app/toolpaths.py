@@ -91,7 +91,7 @@ def place_toolpaths(anchors: list, profile, bed_from_placement) -> tuple[np.ndar
         raise ValueError("print preview: the printer profile has no bed marker in view and the slice does not "
                          "say where the model was placed; slice again")
     why = (f"the printer's bed marker {marker_text(bed)} is not among the markers tracked" if bed is not None
-           else "no bed marker is set up for this printer (Printer set-up > Bed marker...)")
+           else "no bed marker is set up for this printer: Printer set-up, Bed marker...")
     placement_from_bed = np.linalg.inv(np.asarray(bed_from_placement, float))
     T = world_from_placement(anchors[0]) @ np.diag([1e-3, 1e-3, 1e-3, 1.0]) @ placement_from_bed
     return T, "model", f"where the model is placed ({why})"

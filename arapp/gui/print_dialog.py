@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from PySide6.QtCore import QStandardPaths, Signal
+from PySide6.QtCore import QStandardPaths, QTimer, Signal
 from PySide6.QtWidgets import QDialog, QFileDialog, QHBoxLayout, QLabel, QMessageBox, QPushButton, QVBoxLayout
 
 from arapp import user_config
@@ -242,6 +242,9 @@ class PrintDialog(BedFitPart, BedPreviewPart, QDialog):
         if saved is not None:
             self.saved_job_label.setText(f"A print stopped before it finished. {saved.executed_text()} "
                                          "Resume continues it; Print would start it over.")
+            scroll = getattr(self, "scroll_area", None)  # in the side panel (print_panel): bring it into sight
+            if scroll is not None:
+                QTimer.singleShot(0, self, lambda: scroll.ensureWidgetVisible(self.resume_button, 20, 60))
 
     def _target_or_report(self):
         try:

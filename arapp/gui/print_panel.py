@@ -32,6 +32,7 @@ def show_print_panel(window, dlg) -> QDockWidget:
     scroll.setFrameShape(QScrollArea.Shape.NoFrame)
     scroll.setWidget(dlg)
     dock.setWidget(scroll)
+    dlg.scroll_area = scroll  # the dialog scrolls its Resume offer into sight (a stopped print)
     window.addDockWidget(Qt.DockWidgetArea.RightDockWidgetArea, dock)
     model_dock = window.findChild(QDockWidget, "dock_model")
     if model_dock is not None and window.dockWidgetArea(model_dock) == Qt.DockWidgetArea.RightDockWidgetArea:
