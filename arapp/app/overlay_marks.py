@@ -18,7 +18,6 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from arapp.placement import world_from_model
@@ -72,29 +71,37 @@ def fill_triangles(tri: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     even-odd rule, under which overlapping triangles cancel out."""
     h, w = shape
     mask = np.zeros((h, w), np.uint8)
+    tri = np.asarray(tri, np.float32)
     if not len(tri):
         return mask
-    lo = np.clip(np.floor(tri.min(axis=1)).astype(np.int64), 0, [w - 1, h - 1])
-    hi = np.clip(np.floor(tri.max(axis=1)).astype(np.int64), 0, [w - 1, h - 1])
-    onscreen = (tri.max(axis=1) >= 0).all(axis=1) & (tri.min(axis=1) < [w, h]).all(axis=1)
-    tri, lo, hi = tri[onscreen], lo[onscreen], hi[onscreen]
+    tmin, tmax = tri.min(axis=1), tri.max(axis=1)
+    onscreen = (tmax[:, 0] >= 0) & (tmax[:, 1] >= 0) & (tmin[:, 0] < w) & (tmin[:, 1] < h)
+    tri, tmin, tmax = tri[onscreen], tmin[onscreen], tmax[onscreen]
+    if not len(tri):
+        return mask
+    lo = np.clip(np.floor(tmin).astype(np.int32), 0, [w - 1, h - 1])
+    hi = np.clip(np.floor(tmax).astype(np.int32), 0, [w - 1, h - 1])
+    # each edge a -> b as a line equation e(p) = A x + B y + C, signed so that inside is e >= 0 for all three
+    a, b = tri, np.roll(tri, -1, axis=1)
+    A, B = a[..., 1] - b[..., 1], b[..., 0] - a[..., 0]
+    C = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    area = (tri[:, 1, 0] - tri[:, 0, 0]) * (tri[:, 2, 1] - tri[:, 0, 1]) - (tri[:, 1, 1] - tri[:, 0, 1]) * (tri[:, 2, 0] - tri[:, 0, 0])
+    sign = np.where(area < 0, -1.0, 1.0).astype(np.float32)[:, None]
+    coef = np.concatenate([A * sign, B * sign, C * sign], axis=1)  # (F, 9): A0 A1 A2 B0 B1 B2 C0 C1 C2
     n = hi - lo + 1
     count = n[:, 0] * n[:, 1]
     k = np.repeat(np.arange(len(tri)), count)  # one row per (triangle, cell of its box)
-    off = np.arange(len(k)) - np.repeat(np.cumsum(count) - count, count)
-    ix, iy = lo[k, 0] + off % n[k, 0], lo[k, 1] + off // n[k, 0]
-    px, py = ix + 0.5, iy + 0.5
-    t = tri[k]
-
-    def side(a, b):  # (b - a) x (p - a) per row
-        return (t[:, b, 0] - t[:, a, 0]) * (py - t[:, a, 1]) - (t[:, b, 1] - t[:, a, 1]) * (px - t[:, a, 0])
-
-    s1, s2, s3 = side(0, 1), side(1, 2), side(2, 0)
-    inside = ((s1 >= 0) & (s2 >= 0) & (s3 >= 0)) | ((s1 <= 0) & (s2 <= 0) & (s3 <= 0))
+    off = np.arange(len(k), dtype=np.int32) - np.repeat((np.cumsum(count) - count).astype(np.int32), count)
+    nx = n[k, 0]
+    ix, iy = lo[k, 0] + off % nx, lo[k, 1] + off // nx
+    px, py = ix.astype(np.float32) + 0.5, iy.astype(np.float32) + 0.5
+    c = coef[k]
+    inside = ((c[:, 0] * px + c[:, 3] * py + c[:, 6] >= 0) & (c[:, 1] * px + c[:, 4] * py + c[:, 7] >= 0)
+              & (c[:, 2] * px + c[:, 5] * py + c[:, 8] >= 0))
     mask[iy[inside], ix[inside]] = 1
-    c = np.floor(tri.mean(axis=1)).astype(np.int64)
-    ok = (c[:, 0] >= 0) & (c[:, 0] < w) & (c[:, 1] >= 0) & (c[:, 1] < h)
-    mask[c[ok, 1], c[ok, 0]] = 1
+    cen = np.floor(tri.mean(axis=1)).astype(np.int32)
+    ok = (cen[:, 0] >= 0) & (cen[:, 0] < w) & (cen[:, 1] >= 0) & (cen[:, 1] < h)
+    mask[cen[ok, 1], cen[ok, 0]] = 1
     return mask
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from arapp.printing.link import JobFileError, JobState, Program, resume_commands
+from arapp.printing.link import JobState, Program, resume_commands
 from arapp.printing.link.job import check_resumable
 
 @dataclass
