@@ -112,6 +112,10 @@ def test_saved_job_rules_are_the_clis(tmp_path):
     state.status, state.message = "halted", "Thermal Runaway"
     job = tmp_path / "part.printjob.json"
     state.save(job)
+    with pytest.raises(JobFileError, match="USB serial only"):  # no port: it ran through OctoPrint
+        load_saved_job(job)
+    state.port = "/dev/ttyACM0"
+    state.save(job)
     saved = load_saved_job(job)
     assert saved.halted and "Thermal Runaway" in saved.check_text()
     assert "line 5 of 5" in saved.plan_text() and "z 0.30 mm" in saved.executed_text()

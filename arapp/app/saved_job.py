@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from arapp.printing.link import JobState, Program, resume_commands
+from arapp.printing.link import JobFileError, JobState, Program, resume_commands
 from arapp.printing.link.job import check_resumable
 
 @dataclass
@@ -87,6 +87,9 @@ def load_saved_job(job_path, profile=None) -> SavedJob:
     cannot be resumed, FileNotFoundError when its G-code is gone."""
     state = JobState.load(job_path, profile)
     check_resumable(state, job_path, after_halt=True)
+    if not state.port:
+        # as `arapp print --resume`: serial jobs only (an OctoPrint job is OctoPrint's to continue)
+        raise JobFileError(f"{job_path}: this job ran through OctoPrint; it can be resumed over USB serial only")
     gcode = Path(state.gcode)
     if not gcode.is_file():
         raise FileNotFoundError(f"{job_path}: its G-code {gcode} is gone; the print cannot be resumed")
