@@ -20,6 +20,7 @@ from tracking.anchors.discover import Discovery
 from arapp.input_source import open_input
 
 SAMPLED_FRAMES = 8   # frames spread over the video: a board held up for a second of a minute is still met
+ENOUGH_FRAMES = 3    # once something is found in this many, the other sampled frames are not looked at
 
 
 def sample_frames(video: str | Path, count: int = SAMPLED_FRAMES) -> list[np.ndarray]:
@@ -46,7 +47,9 @@ def untracked_lines(video: str | Path, anchors, default_anchors: bool = False, c
     if camera is not None and _anchors_give_a_pose(anchors, camera, frames):
         return []
     found = Discovery()
-    for g in frames:
+    for k, g in enumerate(frames):
+        if k >= ENOUGH_FRAMES and found.suggestions():
+            break   # something was found in frames across the video: the rest would only repeat it
         found.look_all(g)
     lines = [why_line(anchors, found, default_anchors)]
     suggestions = found.suggestions()

@@ -37,8 +37,17 @@ PASSES = tuple((f, p) for f in FAMILIES[:2] for p in POLARITIES) + (("qr", "norm
     (f, p) for f in FAMILIES[2:] for p in POLARITIES)
 # the marker side a suggestion states until the user measures the print (what `arapp markers board` prints)
 DEFAULT_MARKER_M = 0.04
+# ids looked for in each family: OpenCV reads a candidate square against every code of the dictionary, so a
+# family's 1000 (AprilTag 36h10: 2320) codes cost up to 10 times its first 250 (what boards and sheets use)
+LOOKED_FOR_IDS = 250
 MIN_BOARD_MARKERS = 4          # fewer markers do not pin a board's layout
 FIT_TOLERANCE = 0.12           # a layout fits when marker centres land within this fraction of a marker side
+
+
+def first_markers(family: str, n: int) -> cv2.aruco.Dictionary:
+    """The dictionary of `family`'s first `n` markers (ids 0 .. n-1; the same codes, the same ids)."""
+    d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, family))
+    return cv2.aruco.Dictionary(d.bytesList[:n].copy(), d.markerSize, d.maxCorrectionBits)
 
 
 def family_of(dictionary: str) -> str | None:
@@ -128,8 +137,7 @@ class Discovery:
         self.max_side = int(max_side)
         self.passes_per_frame = max(1, int(passes_per_frame))
         params = cv2.aruco.DetectorParameters()
-        self._detectors = {f: cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, f)), params)
-                           for f in FAMILIES}
+        self._detectors = {f: cv2.aruco.ArucoDetector(first_markers(f, LOOKED_FOR_IDS), params) for f in FAMILIES}
         self._qr = cv2.QRCodeDetector()
         self.reset()
 
