@@ -134,7 +134,10 @@ def test_lost_ok_during_autoreport_is_noticed():
         p.close()
         assert ran(emu) == expected
         assert emu.heaters_off()
+        sent = [line.split()[0] for line in emu.received if line.startswith("N") and "M105" not in line]
     assert state.status == "done" and p.timeouts >= 1
+    # Found by a poke (M105) whose `ok T:` accounts for the line: no line of the job went out twice.
+    assert p.pokes >= 1 and len(sent) == len(set(sent))
 
 
 # -- 2. link drops while a resume heats or re-homes; then a second --resume ----------------------

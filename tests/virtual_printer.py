@@ -121,6 +121,8 @@ class RecordingVirtualPrinter(_virtual.VirtualPrinter):
         self._busy_after = dict(busy or {})
         self._busy_keepalive = busy_keepalive
         self._busy_interval = busy_interval
+        self.busy_started = threading.Event()
+        self._ran_cond = threading.Condition()
         self.swallowed: list[int] = []  # line numbers taken but not run (noise)
         self._marlin_resend = marlin_resend
         self._current_line = 0
@@ -162,12 +164,20 @@ class RecordingVirtualPrinter(_virtual.VirtualPrinter):
             self.swallowed.append(self.lastN)
         return super()._triggerResend(expected=expected, actual=actual, checksum=checksum)
 
+    def wait_until_ran(self, predicate, timeout: float) -> bool:
+        """Wait (at most `timeout` s) until predicate(executed) holds; whether it does."""
+        with self._ran_cond:
+            return self._ran_cond.wait_for(lambda: predicate(self.executed), timeout)
+
     def _ran(self, data):
-        self.executed.append(data)
+        with self._ran_cond:
+            self.executed.append(data)
+            self._ran_cond.notify_all()
         seconds = self._busy_after.pop(self.lastN, None)
         if seconds is not None:
             # The command thread sleeps: nothing behind this line is read, run or answered meanwhile.
             self.busy_periods.append((self.lastN, seconds))
+            self.busy_started.set()
             end = time.monotonic() + seconds
             while (left := end - time.monotonic()) > 0 and not self._killed:
                 if self._busy_keepalive:

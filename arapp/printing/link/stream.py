@@ -322,7 +322,7 @@ class LineStream:
         to that M105's number was taken (Marlin takes N only after N-1).
         """
         self.error_seen_at = None
-        self._answered(now)
+        self.last_byte = now
         if temperatures and self.plain_ok_seen:
             for i, copy in enumerate(self.inflight):
                 if self._is_m105(copy) and not copy.rejected:
@@ -331,6 +331,7 @@ class LineStream:
                     if copy.number <= self.confirmed:
                         return Step.IGNORED
                     self._confirm_through(copy.number)
+                    self._answered(now)
                     return Step.CONFIRMED
         elif not temperatures:
             self.plain_ok_seen = True
@@ -343,13 +344,14 @@ class LineStream:
         if copy.rejected or copy.number <= self.confirmed:
             return Step.IGNORED
         self._confirm_through(copy.number)
+        self._answered(now)  # progress: a line newly acknowledged
         return Step.CONFIRMED
 
     def on_resend(self, line: int, now: float) -> Step | Stop:
         """`Resend: line`: the printer's last accepted line is `line - 1`."""
         after_error = self.error_seen_at is not None  # a request with its own `Error:` line is a new one
         self.error_seen_at = None
-        self._answered(now)
+        self.last_byte = now  # alive; progress only once the line asked for is acknowledged
         self.resends += 1
         if line > self.top + 1:
             return Stop(StopReason.BAD_RESEND,
@@ -383,6 +385,7 @@ class LineStream:
         self.honoured = (line, self.confirmed)
         self.epoch += 1
         self.next_number = line
+        self.last_tick = now  # the window runs from the copy asked for
         return Step.REWOUND
 
     def on_error(self, now: float) -> Step:
@@ -439,8 +442,9 @@ class LineStream:
             return None
         deadline = max(self.last_progress, self.last_tick) + self.timeout
         if self.error_seen_at is not None:
-            # An `Error:` without its `Resend:` (a line without number, say): poke soon.
-            deadline = min(deadline, self.error_seen_at + min(1.0, self.timeout))
+            # An `Error:` waits for its `Resend:` (Marlin sends both at once): this long, not less
+            # (on_timeout then takes the error as the whole answer) nor more (poke soon).
+            deadline = self.error_seen_at + min(1.0, self.timeout)
         return deadline
 
     def give_up_after(self) -> float:
