@@ -11,7 +11,10 @@ commands against the file: lines lost and lines run twice.
 
 Fault sets: none; `100:resend` + `115:checksum_mismatch` + line noise (one
 byte damaged in every 100th line on the wire); and the plugin's defaults
-without 105 (adds `110:missing_lineno`, a line that gets no answer at all).
+without 105 (adds `110:missing_lineno`, a line that gets no answer at all);
+and issue #27's busy printer: line noise of one damaged line in 37, `100:resend`
++ `115:checksum_mismatch`, and line 150 after which the firmware sleeps
+3.5 progress windows (7 s for arapp's 2 s window here; 35 s for 10 s).
 """
 
 from __future__ import annotations
@@ -29,6 +32,9 @@ if str(ROOT / "tests") not in sys.path:
 
 HOST_COMMANDS = ("M110", "M115", "M155", "M105")
 STALL_S = 8.0
+ARAPP_TIMEOUT = 2.0  # s, arapp's progress window in these runs
+BUSY_S = 3.5 * ARAPP_TIMEOUT  # the busy fault: 35 s for a 10 s window, scaled
+BUSY_LINE = 150
 
 
 def _sliced_part(quick: bool) -> list[str]:
@@ -65,6 +71,10 @@ def _vp(faults: str):
     settings = {"ambientTemperature": 260.0}
     if faults == "none":
         return VirtualPrinterPty(simulated_errors=[], settings=settings)
+    if faults == "busy+noise":
+        return VirtualPrinterPty(simulated_errors=["100:resend", "115:checksum_mismatch"],
+                                 corrupt_every=37, marlin_resend=True, settings=settings,
+                                 busy={BUSY_LINE: BUSY_S})
     if faults == "resend+noise":
         return VirtualPrinterPty(simulated_errors=["100:resend", "115:checksum_mismatch"],
                                  corrupt_every=100, marlin_resend=True, settings=settings)
@@ -73,17 +83,22 @@ def _vp(faults: str):
 
 
 def _run_arapp(lines, faults, window):
+    from arapp.printing.link import LinkError
     from arapp.printing.link.serial_link import SerialPrinter
 
     with _vp(faults) as vp:
-        p = SerialPrinter(vp.port, 115200, window=window, rx_buffer=63, timeout=2.0)
+        p = SerialPrinter(vp.port, 115200, window=window, rx_buffer=63, timeout=ARAPP_TIMEOUT)
         p.connect()
         t0 = time.perf_counter()
-        p.print_gcode(lines)
+        failed = False
+        try:
+            p.print_gcode(lines)
+        except LinkError:
+            failed = True  # reported as it is (the row says "stopped")
         dt = time.perf_counter() - t0
         p.close()
         executed = list(vp.executed)
-    return dt, executed, False
+    return dt, executed, failed
 
 
 def _run_printcore(lines, faults):
@@ -127,7 +142,7 @@ def run(quick: bool = False) -> str:
     expected = _expected(lines)
     n = len(expected)
     rows = []
-    for faults in ("none", "resend+noise", "defaults-105"):
+    for faults in ("none", "resend+noise", "defaults-105", "busy+noise"):
         results = {}
         results["printcore"] = _run_printcore(lines, faults)
         results["arapp window=1"] = _run_arapp(lines, faults, 1)
@@ -142,7 +157,8 @@ def run(quick: bool = False) -> str:
                 ratio = "printcore stalled"
             else:
                 ratio = f"{base_dt / dt:.2f}"
-            rows.append((faults, host, "stalled" if stalled else f"{dt:.2f}",
+            label = "stalled" if host == "printcore" else "stopped"
+            rows.append((faults, host, label if stalled else f"{dt:.2f}",
                          "-" if stalled else f"{rate:.0f}", ratio, lost, repeated,
                          "yes" if exact and not stalled else "no"))
     out = [
@@ -150,6 +166,7 @@ def run(quick: bool = False) -> str:
         "",
         f"{n} G-code commands (a {'12x12x3' if quick else '20x20x8'} mm box from the built-in slicer), "
         "streamed through real pyserial to OctoPrint's VirtualPrinter on a pty, "
+        f"arapp with a {ARAPP_TIMEOUT:g} s progress window, "
         f"on this 2-core CPU machine (Python {platform.python_version()}; "
         f"Printrun {_version('Printrun')}, OctoPrint {_version('OctoPrint')}, pyserial {_version('pyserial')}). "
         "Ratio = printcore's time / this host's time (higher is faster). "
@@ -164,6 +181,12 @@ def run(quick: bool = False) -> str:
         f"printcore has no reply timeout: a line that gets no answer (`110:missing_lineno`) stops it for good "
         f"(\"stalled\": no progress for {STALL_S:g} s). arapp sends the line again after the printer's `wait` "
         "or its own timeout; the printer refuses any copy it already ran by its line number.",
+        "",
+        f"busy+noise (issue #27): the firmware sleeps {BUSY_S:g} s after line {BUSY_LINE} "
+        f"({BUSY_S / ARAPP_TIMEOUT:g} of arapp's windows) under line noise (one damaged line in 37). arapp pokes "
+        "with a numbered M105 each window without progress and never sends the busy line again; "
+        "printcore, which has no reply timeout, simply waits for the `ok` (a stall shorter than "
+        f"its {STALL_S:g} s detector here). \"stopped\" would mean arapp ended the print with an error.",
     ]
     return "\n".join(out) + "\n"
 

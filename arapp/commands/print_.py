@@ -42,7 +42,8 @@ def add_arguments(parser):
     parser.add_argument("--window", type=int, default=1,
                         help="serial: unacknowledged lines in flight (default 1)")
     parser.add_argument("--timeout", type=float, default=10.0,
-                        help="serial: seconds without an answer before a line is sent again (default 10)")
+                        help="serial: progress window, seconds without an acknowledged line before an M105 poke; "
+                             "12 windows with nothing from the printer end the print (default 10)")
     sl = parser.add_argument_group("slicing (models only; see arapp slice)")
     sl.add_argument("--material", default="PLA", type=str.upper, choices=["PLA", "PETG", "ABS", "TPU", "NYLON"])
     sl.add_argument("--layer-height", type=float, default=0.2, help="mm (default 0.2)")

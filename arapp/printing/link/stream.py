@@ -19,9 +19,10 @@ The rules (docs/domain.md §4, issue #14):
   while a blocking command (M109, M190, G28, G29, G4, M0/M1, M600, M400) is
   the oldest line unanswered on a printer that has sent no `busy:` yet, that
   limit is `blocking_timeout` (a silent firmware homes or probes for minutes).
-- Progress: an answer (`ok`, `Resend:`) or a keep-alive that says the
+- Progress: a line newly acknowledged (`ok`), or a keep-alive that says the
   firmware is working (`busy: processing`, `echo:busy: paused for user`, a
-  heat wait's temperature line) restarts the window. A window without one is
+  heat wait's temperature line), restarts the window (a honoured `Resend:`
+  restarts it from the copy asked for; a loop of requests is not progress). A window without one is
   answered by a poke, never by sending a line again: a numbered `M105` on the
   next free line number (`N<top+1> M105`), sent past the window while
   Marlin's receive buffer has room. A busy firmware runs it after the line it
