@@ -1,0 +1,97 @@
+"""The HTTP backends' shared pieces (arapp.printing.link.webapi): secrets stay on their host across a
+redirect, URLs with credentials are refused, a file position maps to commands done and layer.
+
+Oracles: the headers a second local server actually received; the G-code lines counted by the test.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+import pytest
+import requests
+
+from arapp.printing.link import LinkError
+from arapp.printing.link.job import Program
+from arapp.printing.link.moonraker import MoonrakerLink
+from arapp.printing.link.webapi import FileProgress, SecretSession, check_base_url, gcode_bytes
+
+KEY = "5ecret0key0that0must0stay0home00"
+
+
+def serve(handler):
+    server = ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    return server
+
+
+def test_a_redirect_to_another_host_carries_neither_key_nor_authorization():
+    seen = []
+
+    class Other(BaseHTTPRequestHandler):
+        def log_message(self, *a):
+            pass
+
+        def do_GET(self):
+            seen.append(dict(self.headers))
+            body = json.dumps({"result": {"klippy_connected": False}}).encode()
+            self.send_response(200)
+            self.send_header("Content-Length", str(len(body)))
+            self.end_headers()
+            self.wfile.write(body)
+
+    other = serve(Other)
+
+    class Redirect(BaseHTTPRequestHandler):
+        def log_message(self, *a):
+            pass
+
+        def do_GET(self):
+            self.send_response(302)
+            # "localhost" is another host than "127.0.0.1" for the redirect rule, as a real one would be
+            self.send_header("Location", f"http://localhost:{other.server_address[1]}{self.path}")
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+
+    first = serve(Redirect)
+    try:
+        link = MoonrakerLink(f"http://127.0.0.1:{first.server_address[1]}", KEY)
+        with pytest.raises(LinkError):
+            link.connect()
+        s = SecretSession()
+        s.get(f"http://127.0.0.1:{first.server_address[1]}/x", headers={"Authorization": "Basic c2VjcmV0"},
+              timeout=5)
+    finally:
+        first.shutdown()
+        other.shutdown()
+    assert len(seen) == 2
+    for headers in seen:
+        assert "X-Api-Key" not in headers and "Authorization" not in headers
+        assert KEY not in json.dumps(headers)
+
+
+def test_urls_with_credentials_or_queries_are_refused_redacted():
+    with pytest.raises(ValueError) as info:
+        check_base_url("http://maker:hunter22@voron.local", "Moonraker", "http://mainsailos.local")
+    assert "hunter22" not in str(info.value) and "***@voron.local" in str(info.value)
+    with pytest.raises(ValueError):
+        check_base_url("ftp://voron.local", "Moonraker", "http://mainsailos.local")
+    assert check_base_url(" http://voron.local:7125/ ", "Moonraker", "x") == "http://voron.local:7125"
+
+
+def test_file_position_gives_commands_done_and_layer():
+    lines = ["; start", "G90", "", ";LAYER:0", "G1 X1", "G1 X2 ; two", ";LAYER:1", "G1 X3"]
+    data = gcode_bytes(lines)
+    fp = FileProgress(data, Program.from_lines(lines))
+    # the rule: a command is done once the reader is past its line's newline
+    ends = []
+    pos = 0
+    for line in lines:
+        pos += len(line) + 1
+        ends.append(pos)
+    assert fp.at(0) == (0, -1)
+    assert fp.at(ends[1] - 1) == (0, -1) and fp.at(ends[1]) == (1, -1)   # G90 done
+    assert fp.at(ends[5]) == (3, 0)                                        # G1 X2 done, layer 0
+    assert fp.at(len(data)) == (4, 1) and fp.at_fraction(1.0) == (4, 1)
