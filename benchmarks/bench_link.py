@@ -179,8 +179,9 @@ def run(quick: bool = False) -> str:
     out += [
         "",
         f"printcore has no reply timeout: a line that gets no answer (`110:missing_lineno`) stops it for good "
-        f"(\"stalled\": no progress for {STALL_S:g} s). arapp sends the line again after the printer's `wait` "
-        "or its own timeout; the printer refuses any copy it already ran by its line number.",
+        f"(\"stalled\": no progress for {STALL_S:g} s). arapp pokes with a numbered M105 after the "
+        "printer's `wait` or its own window; the printer refuses the poke by its number and asks for the "
+        "missing line, which alone goes out again.",
         "",
         f"busy+noise (issue #27): the firmware sleeps {BUSY_S:g} s after line {BUSY_LINE} "
         f"({BUSY_S / ARAPP_TIMEOUT:g} of arapp's windows) under line noise (one damaged line in 37). arapp pokes "

@@ -24,6 +24,7 @@ import pytest
 from arapp.printing.link import LinkLost, PrinterHalted
 from arapp.printing.link.serial_link import SerialPrinter
 
+from test_link_faults import bounded
 from test_link_serial import FAULTS, expected_commands, make_gcode, program_commands
 from virtual_printer import VirtualPrinterPty
 
@@ -52,7 +53,7 @@ def connect(vp, **kw) -> SerialPrinter:
 
 def print_and_check(vp, gcode, **kw):
     p = connect(vp, **kw)
-    state = p.print_gcode(gcode)
+    state = bounded(p.print_gcode, gcode, seconds=30)  # a hang fails the test instead of the suite
     p.close()
     assert program_commands(vp.executed, gcode) == expected_commands(gcode)  # each once, in order
     assert state.status == "done" and state.commands_done == len(expected_commands(gcode))
@@ -118,7 +119,7 @@ def test_heaters_off_when_the_printer_halts_after_a_busy_period():
     with noisy_busy_printer(3.5 * WINDOW, inject={200: "trigger_fatal_error_marlin"}) as vp:
         p = connect(vp)
         with pytest.raises(PrinterHalted, match="Thermal Runaway"):
-            p.print_gcode(gcode)
+            bounded(p.print_gcode, gcode)
         p.close()
         ran = program_commands(vp.executed, gcode)
         assert ran == expected_commands(gcode)[: len(ran)] and len(ran) > BUSY_LINE
@@ -131,7 +132,7 @@ def test_heaters_off_when_cancelled_during_a_busy_period():
         p = connect(vp)
         cancel = threading.Event()
         threading.Thread(target=lambda: vp.printer.busy_started.wait(10) and cancel.set(), daemon=True).start()
-        state = p.print_gcode(gcode, cancel=cancel)
+        state = bounded(p.print_gcode, gcode, cancel=cancel)
         p.close()
         moves = [c for c in vp.executed if c.startswith("G1 X")]  # distinct; the cancel adds none
         assert state.status == "cancelled"
@@ -147,7 +148,7 @@ def test_heaters_off_when_a_busy_printer_outlasts_the_liveness_limit():
     with noisy_busy_printer(15 * WINDOW) as vp:
         p = connect(vp, max_timeouts=3)
         with pytest.raises(LinkLost, match="no line for|stopped answering"):
-            p.print_gcode(gcode)
+            bounded(p.print_gcode, gcode)
         p.close()
         ran = program_commands(vp.executed, gcode)
         assert ran == expected_commands(gcode)[: len(ran)]
