@@ -361,7 +361,7 @@ def test_build_area_warning_in_the_dialog_and_red_on_the_bed(qtbot, window, tmp_
 def test_print_through_octoprint(qtbot, window, tmp_path, bed_profile):
     """The same dialog through OctoPrint's REST API (the stand-in server of test_octoprint_link, whose replies
     are copies of a real OctoPrint 1.11's): the exact G-code is uploaded and started, progress reaches 100 %."""
-    from arapp.printing.link.octoprint import save_api_key
+    from arapp.printing.link.webapi import save_api_key
     from test_octoprint_link import KEY, FakeOctoPrint
 
     dlg = sliced_dialog(qtbot, window, tmp_path, bed_profile, size_mm=8.0)

@@ -35,7 +35,7 @@ def test_octoprint_from_the_setup_uses_the_stored_key(qtbot, window, tmp_path):
     from arapp.gui.bed_anchor_dialog import profile_file_for
     from arapp.printing import connection_check as cc
     from arapp.printing.link import OctoPrintTarget
-    from arapp.printing.link.octoprint import load_api_key
+    from arapp.printing.link.webapi import load_api_key
 
     profile = profile_file_for("preset:ender3")  # the set-up's own profile file (as Bed marker... writes it)
     url = "http://octopi.local:5000"

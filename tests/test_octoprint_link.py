@@ -27,13 +27,8 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 import pytest
 import requests
 
-from arapp.printing.link.octoprint import (
-    ApiKeyError,
-    OctoPrintError,
-    OctoPrintLink,
-    load_api_key,
-    save_api_key,
-)
+from arapp.printing.link.octoprint import OctoPrintError, OctoPrintLink
+from arapp.printing.link.webapi import ApiKeyError, load_api_key, save_api_key
 
 KEY = "Zq8v3KJ2x9TEST0KEY0do0not0log0Wm"
 
@@ -366,7 +361,7 @@ def test_api_key_never_follows_a_redirect_to_another_server(host, code):
 def test_api_key_is_kept_on_a_redirect_within_the_same_server(octo):
     # The rule written in the test: same scheme, host and port is the same server (OctoPrint behind a
     # reverse proxy redirecting /api/x to /api/x/); there the key must still arrive.
-    from arapp.printing.link.octoprint import KeySession
+    from arapp.printing.link.webapi import SecretSession as KeySession
 
     session = KeySession()
     session.headers["X-Api-Key"] = KEY
@@ -406,7 +401,7 @@ def test_cli_refuses_credentials_in_the_url_and_stores_them_nowhere(octo, tmp_pa
 
 
 def test_redact_url():
-    from arapp.printing.link.octoprint import redact_url
+    from arapp.printing.link.webapi import redact_url
 
     assert redact_url("http://u:p@h:5000/x?y=1") == "http://***@h:5000/x?y=1"
     assert redact_url("http://h/x") == "http://h/x"

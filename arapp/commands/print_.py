@@ -229,7 +229,7 @@ def run(args) -> int:
     from arapp.printing.link.job import Program, resume_commands
 
     if args.save_key:
-        from arapp.printing.link.octoprint import save_api_key
+        from arapp.printing.link.webapi import save_api_key
 
         path = save_api_key(args.save_key, _read_key_interactively())
         print(f"API key saved to {path} (mode 600)", file=sys.stderr)

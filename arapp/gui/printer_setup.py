@@ -34,7 +34,7 @@ from PySide6.QtWidgets import (
 from arapp import user_config
 from arapp.gui.tasks import Task
 from arapp.printing import connection_check as cc
-from arapp.printing.link.octoprint import ApiKeyError
+from arapp.printing.link.webapi import ApiKeyError
 from arapp.printing.presets import PRESETS, preset_profile
 from arapp.printing.profile import ProfileError, load_profile
 

@@ -24,7 +24,7 @@ from serial.tools import list_ports as lp
 
 from arapp.printing.link.base import LinkError
 from arapp.printing.link.factory import MoonrakerTarget, OctoPrintTarget, SerialTarget
-from arapp.printing.link.octoprint import ApiKeyError, load_api_key, save_api_key
+from arapp.printing.link.webapi import ApiKeyError, load_api_key, save_api_key
 from arapp.printing.link.serial_link import SerialPrinter
 from arapp.printing.presets import preset_profile
 from arapp.printing.profile import load_profile

@@ -53,7 +53,8 @@ def _serial(target: SerialTarget, profile, job_path) -> PrintLink:
 
 
 def _octoprint(target: OctoPrintTarget, profile, job_path) -> PrintLink:
-    from .octoprint import OctoPrintLink, load_api_key  # requests: only for OctoPrint
+    from .octoprint import OctoPrintLink  # requests: only for the HTTP links
+    from .webapi import load_api_key
 
     if not target.url:
         raise ValueError("give the OctoPrint URL (e.g. http://octopi.local) and the API key file")
@@ -64,7 +65,7 @@ def _octoprint(target: OctoPrintTarget, profile, job_path) -> PrintLink:
 
 def _moonraker(target: MoonrakerTarget, profile, job_path) -> PrintLink:
     from .moonraker import MoonrakerLink
-    from .octoprint import load_api_key
+    from .webapi import load_api_key
 
     if not target.url:
         raise ValueError("give the Moonraker URL (e.g. http://mainsailos.local or http://host:7125)")

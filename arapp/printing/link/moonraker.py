@@ -44,8 +44,7 @@ from .base import (
     eta,
 )
 from .job import JobState, Program, new_state
-from .octoprint import API_KEY_HEADER
-from .webapi import FileProgress, SecretSession, check_base_url, gcode_bytes, server_message
+from .webapi import API_KEY_HEADER, FileProgress, SecretSession, check_base_url, gcode_bytes, server_message
 
 log = logging.getLogger("arapp.printing.moonraker")
 

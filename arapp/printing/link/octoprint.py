@@ -9,7 +9,7 @@ progress: completion %, file position in bytes, times), `POST /api/job`
 logged, printed or put in an error message, and key files are written with
 mode 600 (and refused when others can read them).
 
-The key never leaves for another host: `KeySession` drops `X-Api-Key` from a
+The key never leaves for another host: `webapi.SecretSession` drops `X-Api-Key` from a
 redirect to another scheme/host/port (requests keeps custom headers on every
 redirect, it strips only `Authorization`). A URL holding a user name or
 password (`http://user:pw@host`) is refused, and `redact_url` is what any
@@ -20,14 +20,11 @@ from __future__ import annotations
 
 import bisect
 import logging
-import os
 import re
-import stat
 import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from urllib.parse import urlsplit, urlunsplit
 
 import requests
 
@@ -47,6 +44,7 @@ from .base import (
     eta,
 )
 from .job import JobState, Program, new_state
+from .webapi import API_KEY_HEADER, SecretSession, check_base_url
 
 log = logging.getLogger("arapp.printing.octoprint")
 
@@ -66,89 +64,9 @@ class OctoPrintError(LinkError):
     """OctoPrint refused a request or could not be reached."""
 
 
-class ApiKeyError(ValueError):
-    """An API key file that is missing, empty or readable by others."""
-
-
-API_KEY_HEADER = "X-Api-Key"
-
-
-def redact_url(url: str) -> str:
-    """`url` with any user name and password replaced by `***` (what messages and job files may show)."""
-    try:
-        parts = urlsplit(str(url))
-    except ValueError:
-        return "<unparsable URL>"
-    if "@" not in parts.netloc:
-        return str(url)
-    host = parts.netloc.rpartition("@")[2]
-    return urlunsplit((parts.scheme, f"***@{host}", parts.path, parts.query, parts.fragment))
-
-
 def check_octoprint_url(url: str) -> str:
-    """The OctoPrint base URL without a trailing slash, when it is http(s)://host[:port][/path] with no
-    credentials, query or fragment; ValueError (showing the URL redacted) otherwise."""
-    text = str(url).strip()
-    try:
-        parts = urlsplit(text)
-        _ = parts.port  # raises ValueError for a port that is not a number or out of range
-    except ValueError:
-        raise ValueError(f"OctoPrint URL {redact_url(text)!r} cannot be parsed; give e.g. http://octopi.local") from None
-    if parts.scheme not in ("http", "https") or not parts.hostname:
-        raise ValueError(f"OctoPrint URL must start with http:// or https:// and name a host, got {redact_url(text)!r}")
-    if parts.username is not None or parts.password is not None:
-        raise ValueError(f"OctoPrint URL {redact_url(text)!r} holds a user name or password; give it without "
-                         "them (arapp authenticates with the API key file, and would otherwise print and store "
-                         "the password)")
-    if parts.query or parts.fragment:
-        raise ValueError(f"OctoPrint URL {text!r} has a query or fragment; give the server's base URL only")
-    return text.rstrip("/")
-
-
-class KeySession(requests.Session):
-    """A requests Session that sends the API key only to the server it was meant for: on a redirect to
-    another scheme, host or port the `X-Api-Key` header is removed (as requests does for Authorization)."""
-
-    def rebuild_auth(self, prepared_request, response):
-        super().rebuild_auth(prepared_request, response)
-        if self.should_strip_auth(response.request.url, prepared_request.url):
-            prepared_request.headers.pop(API_KEY_HEADER, None)
-
-
-def save_api_key(path, key: str) -> Path:
-    """Write `key` to `path` with file mode 600 (created that way, never wider)."""
-    key = key.strip()
-    if not key or any(c.isspace() for c in key):
-        raise ApiKeyError("the API key is empty or contains spaces; copy it from OctoPrint's Settings > API")
-    path = Path(path).expanduser()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    try:
-        os.fchmod(fd, 0o600)  # whatever the umask
-        os.write(fd, (key + "\n").encode("ascii"))
-    finally:
-        os.close(fd)
-    os.replace(tmp, path)
-    return path
-
-
-def load_api_key(path) -> str:
-    """Read an API key file; refuse one that group or others can read."""
-    path = Path(path).expanduser()
-    try:
-        mode = path.stat().st_mode
-    except OSError as exc:
-        raise ApiKeyError(f"cannot read the API key file {path}: {exc.strerror}") from exc
-    if mode & (stat.S_IRWXG | stat.S_IRWXO):
-        raise ApiKeyError(
-            f"the API key file {path} can be read by other users (mode {stat.S_IMODE(mode):03o}); "
-            f"run: chmod 600 {path}"
-        )
-    key = path.read_text(encoding="ascii", errors="replace").strip()
-    if not key:
-        raise ApiKeyError(f"the API key file {path} is empty")
-    return key
+    """The OctoPrint base URL without a trailing slash (webapi.check_base_url's rules)."""
+    return check_base_url(url, "OctoPrint", "http://octopi.local")
 
 
 class OctoPrintLink(PrintLink):
@@ -191,7 +109,7 @@ class OctoPrintLink(PrintLink):
         return r
 
     def connect(self) -> None:
-        self._session = KeySession()
+        self._session = SecretSession()
         self._session.headers[API_KEY_HEADER] = self._key
         self.version = self._request("GET", "/api/version").json().get("text", "")
         current = self._request("GET", "/api/connection").json().get("current", {})

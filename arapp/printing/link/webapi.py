@@ -1,8 +1,8 @@
-"""What the HTTP printer links (Moonraker, PrusaLink) share: the base URL check, a session that keeps
+"""What the HTTP printer links (OctoPrint, Moonraker) share: the base URL check, a session that keeps
 secrets on their host, the server's own refusal text, and the map from a file position to the job's
 progress.
 
-Secrets rules (the same as OctoPrint's key, arapp.printing.link.octoprint): keys and passwords are read
+Secrets rules, for every backend's key or password: keys and passwords are read
 from files of mode 600 (`load_api_key`), never taken on the command line, never put in a message, a
 log, a repr or a job file; `SecretSession` drops the `X-Api-Key` and `Authorization` headers *and* the
 digest-auth hook (which would answer another host's challenge with our password) from a redirect to
@@ -13,15 +13,73 @@ any message shows of a URL.
 from __future__ import annotations
 
 import bisect
+import os
+import stat
 from collections.abc import Sequence
-from urllib.parse import urlsplit
+from pathlib import Path
+from urllib.parse import urlsplit, urlunsplit
 
 import requests
 
 from .job import Program
-from .octoprint import API_KEY_HEADER, redact_url
 
-__all__ = ["check_base_url", "SecretSession", "server_message", "FileProgress", "redact_url", "gcode_bytes"]
+__all__ = ["API_KEY_HEADER", "ApiKeyError", "save_api_key", "load_api_key", "redact_url", "check_base_url",
+           "SecretSession", "server_message", "FileProgress", "gcode_bytes"]
+
+
+class ApiKeyError(ValueError):
+    """An API key file that is missing, empty or readable by others."""
+
+
+API_KEY_HEADER = "X-Api-Key"
+
+
+def redact_url(url: str) -> str:
+    """`url` with any user name and password replaced by `***` (what messages and job files may show)."""
+    try:
+        parts = urlsplit(str(url))
+    except ValueError:
+        return "<unparsable URL>"
+    if "@" not in parts.netloc:
+        return str(url)
+    host = parts.netloc.rpartition("@")[2]
+    return urlunsplit((parts.scheme, f"***@{host}", parts.path, parts.query, parts.fragment))
+
+
+def save_api_key(path, key: str) -> Path:
+    """Write `key` to `path` with file mode 600 (created that way, never wider)."""
+    key = key.strip()
+    if not key or any(c.isspace() for c in key):
+        raise ApiKeyError("the API key is empty or contains spaces; copy it from the printer server's settings (OctoPrint: Settings > API)")
+    path = Path(path).expanduser()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    try:
+        os.fchmod(fd, 0o600)  # whatever the umask
+        os.write(fd, (key + "\n").encode("ascii"))
+    finally:
+        os.close(fd)
+    os.replace(tmp, path)
+    return path
+
+
+def load_api_key(path) -> str:
+    """Read an API key file; refuse one that group or others can read."""
+    path = Path(path).expanduser()
+    try:
+        mode = path.stat().st_mode
+    except OSError as exc:
+        raise ApiKeyError(f"cannot read the API key file {path}: {exc.strerror}") from exc
+    if mode & (stat.S_IRWXG | stat.S_IRWXO):
+        raise ApiKeyError(
+            f"the API key file {path} can be read by other users (mode {stat.S_IMODE(mode):03o}); "
+            f"run: chmod 600 {path}"
+        )
+    key = path.read_text(encoding="ascii", errors="replace").strip()
+    if not key:
+        raise ApiKeyError(f"the API key file {path} is empty")
+    return key
 
 
 def check_base_url(url: str, what: str, example: str) -> str:
