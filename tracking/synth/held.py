@@ -130,24 +130,59 @@ class HeldRenderer:
     def card_mask(self, world_from_camera: np.ndarray) -> np.ndarray:
         """(H_ss, W_ss) bool: the supersampled pixels whose ray meets the card (in front of the camera,
         within `desk.size` around the anchors' centre)."""
-        T = self.card.desk_from_world @ np.asarray(world_from_camera, float)
-        R, c = T[:3, :3].astype(np.float32), T[:3, 3].astype(np.float32)
-        rx, ry = self.card.rays[..., 0], self.card.rays[..., 1]
-        dz = R[2, 0] * rx + R[2, 1] * ry + R[2, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = -c[2] / dz
-        x = c[0] + s * (R[0, 0] * rx + R[0, 1] * ry + R[0, 2])
-        y = c[1] + s * (R[1, 0] * rx + R[1, 1] * ry + R[1, 2])
+        H, W = self.card.rays.shape[:2]
+        mask = np.zeros((H, W), bool)
+        region = self.card_region(world_from_camera)
+        if region is not None:
+            rs, cs, sub = region
+            mask[rs, cs] = sub
+        return mask
+
+    def _card_mask_in(self, world_from_camera: np.ndarray, rs: slice, cs: slice) -> np.ndarray:
+        """`card_mask` on the supersampled pixels [rs, cs] only."""
+        rays = np.ascontiguousarray(self.card.rays[rs, cs])
+        Hd, valid = self.card.plane_homography(world_from_camera)
         cx, cy = self.scene.centre_desk[:2]
-        return (s > 0) & (np.abs(x - cx) <= self.half[0]) & (np.abs(y - cy) <= self.half[1])
+        # desk (x, y) -> ((x - cx) / hx, (y - cy) / hy): the card is |.| <= 1 in both
+        to_unit = np.array([[1 / self.half[0], 0, -cx / self.half[0]], [0, 1 / self.half[1], -cy / self.half[1]],
+                            [0, 0, 1.0]])
+        h, w = rays.shape[:2]
+        xy = cv2.perspectiveTransform(rays.reshape(-1, 1, 2), to_unit @ Hd).reshape(h, w, 2)
+        inside = cv2.inRange(xy, (-1.0, -1.0), (1.0, 1.0)) > 0
+        return inside & valid(rays)
+
+    def card_region(self, world_from_camera: np.ndarray):
+        """(rows slice, cols slice, mask of that block) around the card's supersampled pixels, or None when
+        the card is out of view: found on a 4-pixel grid first (the card's outline bends little over 4 px),
+        then exact within one grid step around what the grid found."""
+        step = 4
+        H, W = self.card.rays.shape[:2]
+        coarse = self._card_mask_in(world_from_camera, slice(None, None, step), slice(None, None, step))
+        if not coarse.any():
+            return None
+        rows, cols = np.nonzero(coarse.any(axis=1))[0], np.nonzero(coarse.any(axis=0))[0]
+        rs = slice(max(0, (rows[0] - 1) * step), min(H, (rows[-1] + 2) * step))
+        cs = slice(max(0, (cols[0] - 1) * step), min(W, (cols[-1] + 2) * step))
+        return rs, cs, self._card_mask_in(world_from_camera, rs, cs)
+
+    def _wall_image(self, t: float) -> np.ndarray:
+        """The wall's clean image at time t (a copy), kept for the last camera pose: a still webcam sees the
+        same wall in every blur sample and frame."""
+        view = self._room_view(t)
+        key = view.tobytes()
+        if getattr(self, "_wall_key", None) != key:
+            self._wall_key, self._wall_img = key, self.wall.render_clean(view)
+        return self._wall_img.copy()
 
     def render_clean(self, t: float) -> np.ndarray:
         """Noise-free supersampled float32 BGR image at time t: the card over the wall."""
         pose = self.world_from_camera(t)
-        img = self.wall.render_clean(self._room_view(t))
-        mask = self.card_mask(pose)
-        if mask.any():
-            img[mask] = self.card.render_clean(pose)[mask]
+        img = self._wall_image(t)
+        region = self.card_region(pose)
+        if region is not None:
+            rs, cs, mask = region
+            sub = img[rs, cs]
+            sub[mask] = self.card.render_clean(pose, (rs, cs))[mask]
         return img
 
     def _image_motion(self, t0: float, t1: float) -> float:

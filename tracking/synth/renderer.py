@@ -55,6 +55,13 @@ def _pixel_rays(camera: Camera) -> np.ndarray:
     return _cached(key, make)
 
 
+def _apply_homography(rays: np.ndarray, H: np.ndarray) -> np.ndarray:
+    """H (3x3, float64) applied to rays (h, w, 2) float32 C-contiguous: (h, w, 2) float32 (0 where the
+    homogeneous w is within FLT_EPSILON of 0)."""
+    h, w = rays.shape[:2]
+    return cv2.perspectiveTransform(rays.reshape(-1, 1, 2), H).reshape(h, w, 2)
+
+
 def _texture(w, h, ppm, seed, x_min, y_max, style):
     return _cached(("tex", w, h, ppm, seed, x_min, y_max, style),
                    lambda: make_desk_texture(w, h, ppm, seed, x_min=x_min, y_max=y_max, style=style))
@@ -102,12 +109,90 @@ class DeskRenderer:
         return self.world_from_desk @ desk_from_cam
 
     # -- rendering ---------------------------------------------------------------
-    def render_clean(self, world_from_camera: np.ndarray) -> np.ndarray:
+    def render_clean(self, world_from_camera: np.ndarray, region: tuple[slice, slice] | None = None) -> np.ndarray:
         """Noise-free supersampled float32 BGR image of the desk and anchors from this pose.
 
         `world_from_camera` is one 4x4 pose, or (H_ss, 4, 4): one pose per supersampled row (a rolling
-        shutter, see `row_poses`).
+        shutter, see `row_poses`). `region` (rows, cols slices of the supersampled image, one pose only)
+        renders just that part.
         """
+        P = np.asarray(world_from_camera, np.float64)
+        if P.ndim == 3:
+            if region is not None:
+                raise ValueError("render_clean: a region needs one pose, not one per row")
+            return self._render_rolling(P)
+        rs, cs = region if region is not None else (slice(None), slice(None))
+        rays = self.rays[rs, cs]
+        if not rays.flags.c_contiguous:
+            rays = np.ascontiguousarray(rays)
+        Hd, valid = self.plane_homography(P)
+        # the desk plane seen through a pinhole is a homography of the (undistorted) rays: texture pixels
+        # (u, v) are one 3x3 matrix applied to them (cv2 works in double, exact to float32 rounding)
+        tex = self.texture
+        to_tex = np.array([[tex.ppm, 0.0, -tex.x_min * tex.ppm - 0.5],
+                           [0.0, -tex.ppm, tex.y_max * tex.ppm - 0.5], [0.0, 0.0, 1.0]])
+        uv = _apply_homography(rays, to_tex @ Hd)
+        ok = valid(rays)
+        all_ok = bool(ok.all())
+        if not all_ok:
+            uv[~ok] = -10
+        img = cv2.remap(tex.image, uv, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                        borderValue=FLOOR_BGR.tolist()).astype(np.float32)
+        step = 4  # find each anchor's paper on a coarse grid first, then evaluate cells only around it
+        H, W = ok.shape
+        for pat, A in self.patterns:
+            # desk (x, y) -> print (p, q): affine, so rays -> (p, q) is one homography too
+            to_print = np.array([[pat.sx, 0.0, -pat.origin[0] * pat.sx], [0.0, pat.sy, -pat.origin[1] * pat.sy],
+                                 [0.0, 0.0, 1.0]]) @ np.vstack([A, [0.0, 0.0, 1.0]]) @ Hd
+
+            def paper_and_value(sr, sc):
+                sub_rays = np.ascontiguousarray(rays[sr, sc])
+                pq = _apply_homography(sub_rays, to_print).astype(np.float64)
+                paper, value = pat.sample(pq[..., 0], pq[..., 1])
+                return paper & ok[sr, sc], value
+
+            coarse, _ = paper_and_value(slice(None, None, step), slice(None, None, step))
+            if not coarse.any():
+                continue
+            rows, cols = np.nonzero(coarse.any(axis=1))[0], np.nonzero(coarse.any(axis=0))[0]
+            sr = slice(max(0, (rows[0] - 1) * step), min(H, (rows[-1] + 2) * step))
+            sc = slice(max(0, (cols[0] - 1) * step), min(W, (cols[-1] + 2) * step))
+            paper, value = paper_and_value(sr, sc)
+            ink = paper & (value == 0)
+            sub = img[sr, sc]
+            sub[paper & ~ink] = PAPER_BGR
+            sub[ink] = INK_BGR
+        # Soft desk lamp: brighter near one side, in desk coordinates so it moves with the scene:
+        # 0.88 + 0.2 exp(-|(x, y) - lamp|^2 / 0.5), the offset scaled by 1/sqrt(0.5) by one more homography.
+        k = 1.0 / np.sqrt(0.5)
+        to_lamp = np.array([[k, 0.0, -k * (self.centre[0] + 0.3)], [0.0, k, -k * (self.centre[1] + 0.2)],
+                            [0.0, 0.0, 1.0]])
+        d = _apply_homography(rays, to_lamp @ Hd)
+        r2 = cv2.transform(d * d, np.ones((1, 2)))
+        lamp = cv2.exp(-r2) * np.float32(0.2) + np.float32(0.88)
+        if not all_ok:
+            lamp[~ok] = 1.0
+        img *= lamp[..., None]
+        return img
+
+    def plane_homography(self, world_from_camera: np.ndarray):
+        """(Hd, valid): Hd (3x3) maps a ray (x/z, y/z, 1) of the camera at this pose to homogeneous desk
+        (x, y, 1) metres where it meets the desk plane; valid(rays (h, w, 2)) -> (h, w) bool: the ray meets
+        the plane in front of the camera (and not at its horizon, where cv2 gives 0)."""
+        T = self.desk_from_world @ np.asarray(world_from_camera, np.float64)
+        R, c = T[:3, :3], T[:3, 3]
+        # point = c + s R r with s = -c_z / (R r)_z: x = (c_x (R r)_z - c_z (R r)_x) / (R r)_z
+        Hd = np.array([c[0] * R[2] - c[2] * R[0], c[1] * R[2] - c[2] * R[1], R[2]])
+        sign = -1.0 if c[2] > 0 else 1.0   # s > 0: (R r)_z has the sign of -c_z
+
+        def valid(rays):
+            dz = cv2.transform(rays, (sign * R[2]).reshape(1, 3))
+            return dz > np.float32(np.finfo(np.float32).eps)
+
+        return Hd, valid
+
+    def _render_rolling(self, world_from_camera: np.ndarray) -> np.ndarray:
+        """`render_clean` with one pose per supersampled row (H_ss, 4, 4): per-pixel ray casting."""
         P = np.asarray(world_from_camera, np.float64)
         if P.ndim == 2:
             T = self.desk_from_world @ P
