@@ -2,7 +2,9 @@
 
 Each supersampled output pixel is traced as a ray through the distorted
 camera model (`Camera.unproject`, so lens distortion is applied exactly) and
-intersected with the desk plane; the desk texture is sampled there and the
+intersected with the desk plane (for one pose that intersection is a homography
+of the rays, applied by cv2.perspectiveTransform in double; a rolling shutter's
+pose per row is cast per pixel); the desk texture is sampled there and the
 printed anchors are evaluated analytically from their bit cells, so the
 ground-truth pose is exact to the renderer's sampling. Supersampled pixels are
 averaged down with INTER_AREA, which keeps OpenCV's pixel-centre convention
