@@ -66,6 +66,8 @@ pid_Ki: 1.08
 pid_Kd: 114
 min_temp: 0
 max_temp: 250
+# no MCU, so the hotend reads 0 degC: let a sliced job's extrusion through (the GUI print test)
+min_extrude_temp: 0
 
 [heater_bed]
 heater_pin: PA5

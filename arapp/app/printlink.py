@@ -15,10 +15,10 @@ from dataclasses import dataclass
 
 from serial.tools import list_ports
 
-from arapp.printing.link import LinkLost, OctoPrintTarget, PrinterHalted, SerialTarget, make_link
+from arapp.printing.link import LinkLost, MoonrakerTarget, OctoPrintTarget, PrinterHalted, SerialTarget, make_link
 from arapp.printing.gcode import format_duration
 
-__all__ = ["SerialTarget", "OctoPrintTarget", "PrintEvent", "PrintJob", "start_job", "serial_ports"]
+__all__ = ["SerialTarget", "OctoPrintTarget", "MoonrakerTarget", "PrintEvent", "PrintJob", "start_job", "serial_ports"]
 
 
 @dataclass

@@ -215,7 +215,10 @@ class PrintDialog(BedFitPart, BedPreviewPart, QDialog):
             self.port.setCurrentText(current)
 
     def target(self):
-        """The printer chosen in the dialog (printlink.SerialTarget or OctoPrintTarget)."""
+        """The printer chosen in the dialog (printlink.SerialTarget, OctoPrintTarget or MoonrakerTarget)."""
+        if self.use_moonraker.isChecked():
+            return with_setup_key(printlink.MoonrakerTarget(self.moonraker_url.text().strip(),
+                                                            self.api_key_file.text().strip()))
         if self.use_octoprint.isChecked():
             return with_setup_key(printlink.OctoPrintTarget(self.octoprint_url.text().strip(),
                                                             self.api_key_file.text().strip()))

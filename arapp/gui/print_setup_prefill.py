@@ -15,7 +15,7 @@ from pathlib import Path
 from arapp import user_config
 from arapp.gui.printer_setup import STATE_KEY, saved_choice
 from arapp.printing import connection_check as cc
-from arapp.printing.link import OctoPrintTarget
+from arapp.printing.link import MoonrakerTarget, OctoPrintTarget
 
 STORED_KEY_HINT = "the key stored by Printer set-up (or a file holding another)"
 
@@ -43,6 +43,14 @@ def prefill(dlg) -> str:
             dlg.api_key_file.clear()
             dlg.api_key_file.setPlaceholderText(STORED_KEY_HINT)
         return f"From Printer set-up: OctoPrint at {url}"
+    if choice.get("link") == "moonraker" and choice.get("url"):
+        url = str(choice["url"]).strip()
+        dlg.use_moonraker.setChecked(True)
+        dlg.moonraker_url.setText(url)
+        if (cc.saved_target(choice) or MoonrakerTarget("")).api_key_file:
+            dlg.api_key_file.clear()
+            dlg.api_key_file.setPlaceholderText(STORED_KEY_HINT)
+        return f"From Printer set-up: Klipper (Moonraker) at {url}"
     if choice.get("port"):
         dlg.use_serial.setChecked(True)
         dlg.port.setCurrentText(str(choice["port"]))
@@ -59,12 +67,13 @@ def remember_printer(key: str) -> None:
 
 
 def with_setup_key(target):
-    """`target` unchanged, except an OctoPrint target with no key file at the set-up's address: then the
-    set-up's own target, which reads the stored key."""
-    if not isinstance(target, OctoPrintTarget) or target.api_key_file:
+    """`target` unchanged, except an OctoPrint or Moonraker target with no key file at the set-up's address:
+    then the set-up's own target, which reads the stored key."""
+    if not isinstance(target, (OctoPrintTarget, MoonrakerTarget)) or target.api_key_file:
         return target
     choice = saved_choice()
-    saved = cc.saved_target(choice) if choice.get("link") == "octoprint" else None
-    if isinstance(saved, OctoPrintTarget) and _same_url(saved.url, target.url) and Path(saved.api_key_file).is_file():
+    saved = cc.saved_target(choice) if choice.get("link") in ("octoprint", "moonraker") else None
+    if (type(saved) is type(target) and _same_url(saved.url, target.url) and saved.api_key_file
+            and Path(saved.api_key_file).is_file()):
         return replace(target, api_key_file=saved.api_key_file)
     return target

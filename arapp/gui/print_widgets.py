@@ -114,7 +114,7 @@ def preview_box(dlg) -> QGroupBox:
     return prev
 
 def send_box(dlg) -> QGroupBox:
-    """The printer group: serial port and baud or OctoPrint URL and key file, Print/Pause/Cancel, progress,
+    """The printer group: serial port and baud, or an OctoPrint or Moonraker URL and key file, Print/Pause/Cancel, progress,
     layer, ETA, the printer's message and the temperature graph."""
     send = QGroupBox("Send to printer")
     sf = QFormLayout(send)
@@ -136,6 +136,11 @@ def send_box(dlg) -> QGroupBox:
     dlg.api_key_file = QLineEdit()
     dlg.api_key_file.setPlaceholderText("file holding the API key (mode 600)")
     sf.addRow(dlg.use_octoprint, dlg.octoprint_url)
+    dlg.use_moonraker = QRadioButton("Klipper (Moonraker)")
+    dlg.moonraker_url = QLineEdit()
+    dlg.moonraker_url.setPlaceholderText("http://mainsailos.local:7125")
+    sf.addRow(dlg.use_moonraker, dlg.moonraker_url)
+    # one key field for both servers: Moonraker's is optional (none for its trusted clients)
     sf.addRow("API key file", dlg.api_key_file)
     row2 = QHBoxLayout()
     dlg.send_button = _button("Print", dlg.start_print, False)
@@ -175,7 +180,14 @@ def settings_values(dlg) -> dict:
             "layer_height": dlg.layer_height.value(), "infill": dlg.infill.value(),
             "perimeters": dlg.perimeters.value(), "slicer": dlg.slicer.currentText(), "octoprint_url": dlg.octoprint_url.text(),
             "api_key_file": dlg.api_key_file.text(),
-            "link": "octoprint" if dlg.use_octoprint.isChecked() else "serial"}
+            "moonraker_url": dlg.moonraker_url.text(), "link": link_kind(dlg)}
+
+
+def link_kind(dlg) -> str:
+    """Which printer link the dialog's radio buttons choose: "serial", "octoprint" or "moonraker"."""
+    if dlg.use_octoprint.isChecked():
+        return "octoprint"
+    return "moonraker" if dlg.use_moonraker.isChecked() else "serial"
 
 
 def restore_settings(dlg, settings) -> None:
@@ -194,5 +206,9 @@ def restore_settings(dlg, settings) -> None:
     dlg.slicer.setCurrentText(str(get("slicer", "built-in")))
     dlg.octoprint_url.setText(str(get("octoprint_url", "")))
     dlg.api_key_file.setText(str(get("api_key_file", "")))
-    if str(get("link", "serial")) == "octoprint":
+    dlg.moonraker_url.setText(str(get("moonraker_url", "")))
+    link = str(get("link", "serial"))
+    if link == "octoprint":
         dlg.use_octoprint.setChecked(True)
+    elif link == "moonraker":
+        dlg.use_moonraker.setChecked(True)
