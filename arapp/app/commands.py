@@ -216,6 +216,14 @@ class ArRecordStop:
 
 
 @dataclass(frozen=True)
+class EndDiscovery:
+    """Stop looking for other anchors in the picture (the offer was answered; arapp.app.discovery)."""
+
+    def apply(self, engine) -> None:
+        engine.end_discovery()
+
+
+@dataclass(frozen=True)
 class Stop:
     """End the engine: both threads finish, closing the source and the pipeline."""
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from arapp.app import recording
 from arapp.app.capture import ArVideoWriter
+from arapp.app.discovery import DiscoveryStage
 from arapp.app.editing import edited_model, model_mesh
 from arapp.app.events import Events
 from arapp.app.player import ON_DEMAND, Player
@@ -64,6 +65,14 @@ def default_pipeline(source, info: SourceInfo) -> Pipeline:
     """The live view's pipeline: tracking and drawing, no status line (the app shows the state itself);
     the model arrives later as a command."""
     return Pipeline(info.camera, info.anchors, status_line=False)
+
+
+def _are_default(anchors: list) -> bool:
+    """Whether `anchors` are the app's default board (the why line then says none were chosen)."""
+    from arapp.app.session import DEFAULT_ANCHORS   # here: session.py is the app model above the engine
+    from tracking.session import parse_anchors
+
+    return [a.to_dict() for a in anchors] == [a.to_dict() for a in parse_anchors(DEFAULT_ANCHORS)]
 
 
 class TappedSlot(LatestSlot):
@@ -144,7 +153,10 @@ class LiveEngine:
         self._life = threading.Lock()
         self._stopped = False
         # the processing side's view of the model, copied into each frame's `extra`
-        self.state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0, "toolpaths": None}
+        # `discovery`: what anchor discovery found while the anchors gave no pose (discovery.offer_dict)
+        self.state = {"mesh_faces": 0, "model_gen": 0, "mode": "shaded", "resets": 0, "toolpaths": None,
+                      "discovery": None}
+        self.discovery: DiscoveryStage | None = None
         self._models: dict = {}  # path -> the model as loaded (SetModel without a model object)
         self._toolpaths: ToolpathStage | None = None
         self._toolpaths_lock = threading.Lock()
@@ -171,6 +183,9 @@ class LiveEngine:
             processor = Processor(lambda: self.pipeline_factory(source, info), self.captured, self.shown,
                                   on_ready=self._ready, on_error=self.events.error.emit,
                                   skipped=lambda: self.player.skipped, wrap=self.wrap)
+            self.discovery = DiscoveryStage(info.anchors, lambda d: self.state.__setitem__("discovery", d),
+                                            default_anchors=_are_default(info.anchors))
+            processor.watch = self.discovery.observe
             self.stage.start(processor)
         if info.live and self.autoplay:
             self.player.play()  # a camera does not wait
@@ -194,6 +209,7 @@ class LiveEngine:
         if closing is not None:
             closing.join(10.0)
         self.player.stop()
+        self.end_discovery()
         with self._toolpaths_lock:
             if self._toolpaths is not None:
                 self._toolpaths.stop()
@@ -236,6 +252,11 @@ class LiveEngine:
     def submit(self, fn: Callable[[Any], None]) -> None:
         """Run fn(pipeline) in the processing thread between frames (queued until the pipeline exists)."""
         self.stage.submit(fn)
+
+    def end_discovery(self) -> None:
+        """Stop anchor discovery (its offer was answered, or the engine stops)."""
+        if self.discovery is not None:
+            self.discovery.finish()
 
     def load(self, path: str, edits: dict):
         """The model file at `path` (loaded once) with control-point `edits` applied, tessellated here (in

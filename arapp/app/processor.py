@@ -112,6 +112,8 @@ class Processor(threading.Thread):
         self.skipped = skipped or (lambda: 0)
         self.wrap = wrap
         self.highlight: tuple[int, int, int] | None = None  # (surface, i, j) control point marked on screen
+        # watch(image, world_from_camera) after each newly tracked frame (anchor discovery: arapp.app.discovery)
+        self.watch: Callable[[np.ndarray, Any], None] | None = None
         # (width, height) the view shows the frame at; the image is scaled here, off the UI thread,
         # so painting is a 1:1 copy. None: full size.
         self.display_size: tuple[int, int] | None = None
@@ -177,6 +179,8 @@ class Processor(threading.Thread):
                         result = redraw(self.pipeline, item, last_result)
                     else:
                         result = self.pipeline.process(item.image, item.t, item.index)
+                        if self.watch is not None:
+                            self.watch(item.image, result.world_from_camera)
                 except Exception as exc:  # noqa: BLE001 - one bad frame must not end the view
                     self._report("Tracking or rendering failed", exc)
                     continue

@@ -23,6 +23,7 @@ import numpy as np
 
 from arapp.app import commands as cmd
 from arapp.app import recording
+from arapp.app import source_anchors
 from arapp.app.editing import display_placement, edited_model, model_mesh
 from arapp.app.events import Events
 from arapp.app.capture import VIDEO_CODECS, new_capture_path, save_screenshot
@@ -36,6 +37,7 @@ from arapp.exchange.meshes import is_mesh_path
 from arapp.pipeline import MODES, load_display_model
 from arapp.placement import Placement, dragged_placement, placement_point_at_pixel
 from tracking.anchors.defaults import DEFAULT_DICTIONARY
+from tracking.anchors.discover import Suggestion
 from tracking.session import parse_anchors
 
 RECENT_MAX = 8
@@ -103,7 +105,9 @@ class Session:
     on the view, "" when the error message says it), error(title, message), status(text, ms), recorded(folder),
     model_loaded(model, path, placement), model_edited(model),
     placement_changed(Placement), mode_changed(mode), playing_changed(bool),
-    toolpaths_shown(info), recent_changed(), print_session(PrintSession).
+    toolpaths_shown(info), recent_changed(), print_session(PrintSession),
+    anchor_offer(dict): anchor discovery found something (arapp.app.discovery.offer_dict; `use_offer` or
+    `dismiss_offer` answer it).
     """
 
     def __init__(self, make_engine: Callable[..., Any], settings=None, runner=None):
@@ -113,7 +117,7 @@ class Session:
         self.events = Events("source_opening", "source_opened", "frame", "ended", "error", "status", "recorded",
                              "model_loaded", "model_edited", "placement_changed", "mode_changed",
                              "playing_changed", "toolpaths_shown", "recent_changed", "print_session",
-                             "source_failed", "ar_recording_changed")
+                             "source_failed", "ar_recording_changed", "anchor_offer")
         self.engine = None
         self.old_engines: list = []
         self.source_spec: str | None = None
@@ -143,6 +147,7 @@ class Session:
         self._edit = self.run.latest(retessellate, self._edit_done, self._edit_failed, name="arapp-edit")
         self.history = History(self)  # undo / redo of control-point edits and placement
         self.first_picture = FirstPictureWatch()  # a source silent for its timeout_s is given up (`tick`)
+        self.anchor_offer: dict | None = None  # what anchor discovery found in the open source, unanswered
 
     # -- errors and messages -------------------------------------------------------------
     def report(self, title: str, message: str) -> None:
@@ -189,8 +194,10 @@ class Session:
     def open_source(self, spec: str) -> None:
         """Open a recording folder, a video (`file:PATH[?calibration=YAML]`), `v4l2:N` or `depthai[:id]`."""
         self.close_source()
+        self.anchor_offer = None
         try:
-            anchors = parse_anchors(self.anchors_json())
+            # anchors accepted for this very source (an anchor offer) before the anchors setting
+            anchors = parse_anchors(source_anchors.remembered(spec) or self.anchors_json())
         except ValueError as exc:
             self.report("Anchors are not valid", str(exc))
             anchors = parse_anchors(DEFAULT_ANCHORS)
@@ -297,7 +304,47 @@ class Session:
         if shown is not None:
             self.first_picture.stop()
             self.last_shown = shown
+            self._check_offer(shown)
             self.events.frame.emit(shown)
+
+    # -- anchor discovery's offer ------------------------------------------------------------------
+    def _check_offer(self, shown) -> None:
+        extra = getattr(shown.result, "extra", None)
+        found = extra.get("discovery") if isinstance(extra, dict) else None
+        if found and found != self.anchor_offer and self.engine is not None:
+            self.anchor_offer = dict(found)
+            self.events.anchor_offer.emit(self.anchor_offer)
+
+    def use_offer(self, size_mm: float | None = None) -> list | None:
+        """Track what anchor discovery found, its marker (or QR code) `size_mm` millimetres as measured on
+        the print (None: the size assumed): remembered for this source (arapp.app.source_anchors) and the
+        source reopened with it. Returns the anchor blocks used (metres); None without an offer."""
+        offer = self.anchor_offer
+        if not offer or not offer.get("block") or not self.source_spec:
+            return None
+        block = dict(offer["block"])
+        if size_mm is not None:
+            if not size_mm > 0:
+                self.report("Marker size must be positive", f"got {size_mm} mm; measure a printed marker's side")
+                return None
+            block = Suggestion(str(block.get("kind")), str(offer["summary"]), block,
+                               offer["size_field"]).with_size(float(size_mm) / 1000.0)
+        anchors = [block]
+        try:
+            parse_anchors(anchors)
+        except ValueError as exc:
+            self.report("Cannot use the anchors found", str(exc))
+            return None
+        self.send(cmd.EndDiscovery())
+        source_anchors.remember(self.source_spec, anchors)
+        self.status(f"Tracking {offer['summary']} ({size_mm if size_mm is not None else offer['size_mm']:g} mm), "
+                    f"remembered for this source", 8000)
+        self.open_source(self.source_spec)
+        return anchors
+
+    def dismiss_offer(self) -> None:
+        """Not now: discovery stops looking in this source until it is opened again."""
+        self.send(cmd.EndDiscovery())
 
     def _ended(self) -> None:
         self.events.playing_changed.emit(False)

@@ -21,6 +21,7 @@ from arapp.app import sheets
 from arapp.app.editing import library_thumbnails
 from arapp.app.paint_stats import PaintStats
 from arapp.app.session import Session, as_bool
+from arapp.gui.anchor_offer import install as install_anchor_offer
 from arapp.gui.errors import ErrorBoxes
 from arapp.gui.first_hour import install as install_first_hour
 from arapp.gui.habits import install_habits
@@ -79,6 +80,7 @@ class MainWindow(QMainWindow):
         self._status_timer.start()
         install_habits(self)  # undo/redo, export, screenshot, AR video, title, controls enabled when they can act
         install_first_hour(self)  # welcome, calibration banner + wizard, lost hint, printer set-up, Help
+        install_anchor_offer(self)  # "Found a 4x3 ... board: use it?" when the anchors give no pose
         install_scan(self)  # scan mode: the Scan dock and the dome of view directions over the view
         install_marks(self)  # detected markers outlined with their axes (View menu toggle)
         install_orbit(self)  # the model in 3D when there is nothing to put it on

@@ -41,7 +41,7 @@ from tracking.session import parse_anchors
 PRELOAD = ["numpy", "cv2", "arapp.pipeline", "arapp.app.live", "tracking.sources", "tracking.tracker",
            "arapp.geometry.model", "trimesh"]
 # the model state each frame carries back (LiveEngine.state)
-STATE_KEYS = ("mesh_faces", "model_gen", "mode", "resets", "toolpaths")
+STATE_KEYS = ("mesh_faces", "model_gen", "mode", "resets", "toolpaths", "discovery")
 _context = None
 _context_lock = threading.Lock()
 
