@@ -78,7 +78,7 @@ def test_held_card_ground_truth_is_the_card_frame():
     from tracking.anchors.model import build_models
     from tracking.poses import invert
 
-    frames, session = held_recording("tune_held_board", slice(0, 42))
+    frames, session = held_recording("test_held_board", slice(0, 42))
     model = build_models(session.anchors)[0]
     params = cv2.aruco.DetectorParameters()
     params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_SUBPIX
@@ -98,10 +98,10 @@ def test_held_card_ground_truth_is_the_card_frame():
             stale.append(gap(frames[0][2], obj, c))   # the first frame's truth: a camera still in the card's frame
     assert len(gaps) >= 40 and float(np.median(gaps)) < 0.75 and float(np.max(gaps)) < 3.0, np.percentile(gaps, [50, 100])
     assert float(np.max(stale)) > 10.0   # by frame 36 the card has moved: the truth must have followed it
-    assert _run("tune_held_board")["travel"] > 0.1   # the card really moves: 10 cm and more before the camera
+    assert _run("test_held_board")["travel"] > 0.1   # the card really moves: 10 cm and more before the camera
 
 
-@pytest.mark.parametrize("name", [n for n in HELD if "board" in n or "both" in n])
+@pytest.mark.parametrize("name", [n for n in HELD_TEST if "board" in n or "both" in n])
 def test_held_board_card_is_followed(name):
     """A board card held and waved before the camera: arapp notices it moves in the room, places at least as
     many frames as plain OpenCV, none more than 3 cm off (plain places its smeared detections 5-17 cm off)."""
@@ -119,7 +119,7 @@ def test_held_board_card_is_followed(name):
                    "than plain OpenCV (it does not start on the smeared frames after a swing, where plain reads 2-8 cm "
                    "off), and a lone marker's pose is too noisy for the background test (boards only), so the card is seen "
                    "to move only by the map, after the first swing, which the still room's flow carries up to 21 cm off")
-@pytest.mark.parametrize("name", [n for n in HELD if "marker" in n])
+@pytest.mark.parametrize("name", [n for n in HELD_TEST if "marker" in n])
 def test_held_marker_card_is_no_worse_than_plain(name):
     """A lone 6 cm marker card: its four corners hold the camera position to only 1-3 cm at 0.42 m (the
     plain peer's own median), so the goal here is the peer's: as many frames placed, and the worst frame
