@@ -41,14 +41,17 @@ class DiscoveryStage:
 
     anchors: the AnchorSpecs tracked (worded in the why line); publish(dict): called from the stage's
     thread with each new finding (offer_dict); default_anchors: the anchors are the app's default (the why
-    line says so); clock: wall-clock seconds (tests pass a fake one)."""
+    line says so); offer: False for a source that names its own anchors (a recording's session.json, which
+    wins over any other), where only the why is published; clock: wall-clock seconds (tests pass a fake one)."""
 
     def __init__(self, anchors: list, publish: Callable[[dict], None], *, default_anchors: bool = False,
+                 offer: bool = True,
                  after_s: float | None = None, rate_hz: float | None = None,
                  clock: Callable[[], float] = time.monotonic):
         self.anchors = list(anchors)
         self.publish = publish
         self.default_anchors = default_anchors
+        self.offer = offer
         # the module's values when not given, read now (tests shorten them)
         self.after_s = float(LOST_BEFORE_S if after_s is None else after_s)
         self.rate_hz = float(RATE_HZ if rate_hz is None else rate_hz)
@@ -95,7 +98,10 @@ class DiscoveryStage:
             if got is None or self.done.is_set():
                 continue
             image, t = got
-            self.look(image, t)
+            try:
+                self.look(image, t)
+            except cv2.error:
+                self.finish()   # a frame OpenCV cannot read: no offer, and the view goes on as it was
 
     def look(self, image, t: float) -> None:
         """Feed one frame to Discovery and publish when the finding changed (the stage's thread; tests call
@@ -104,9 +110,9 @@ class DiscoveryStage:
         if not self.discovery.feed(gray, t):
             return
         self.fed += 1
-        found = self.discovery.suggestions()
+        found = self.discovery.suggestions() if self.offer else []
         top = found[0] if found else None
-        if top is None and self.discovery.rounds < 1.0:
+        if top is None and self.discovery.rounds < 1.0 and not self.discovery.markers_seen:
             return   # nothing yet, and not every dictionary looked at: no why to tell
         why = why_line(self.anchors, self.discovery, self.default_anchors)
         key = (None if top is None else (top.summary, tuple(sorted(top.block.items(), key=str))), why)

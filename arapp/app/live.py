@@ -184,7 +184,8 @@ class LiveEngine:
                                   on_ready=self._ready, on_error=self.events.error.emit,
                                   skipped=lambda: self.player.skipped, wrap=self.wrap)
             self.discovery = DiscoveryStage(info.anchors, lambda d: self.state.__setitem__("discovery", d),
-                                            default_anchors=_are_default(info.anchors))
+                                            default_anchors=_are_default(info.anchors),
+                                            offer=not getattr(getattr(source, "session", None), "anchors", None))
             processor.watch = self.discovery.observe
             self.stage.start(processor)
         if info.live and self.autoplay:

@@ -41,8 +41,8 @@ class AnchorOfferBar(QFrame):
         self.hide()
 
     def show_offer(self, offer: dict) -> None:
-        if not offer.get("summary"):
-            return   # only a why line so far: the hint tells it
+        if not offer.get("summary") or not offer.get("block"):
+            return   # only a why line: the hint tells it
         self.offer = offer
         summary = str(offer["summary"])
         self.label.setText(f"Found {summary}: use it?")
