@@ -182,7 +182,8 @@ def _plot(path: Path, gt_t, gt_p, est_t, est_p) -> None:
     ax2.set_ylabel("z (m)")
     ax2.set_title("camera height over the anchor")
     for ax in (ax1, ax2):
-        ax.legend(loc="best", fontsize=8)
+        if ax.get_legend_handles_labels()[1]:  # a replay that tracked nothing and has no truth plots no line
+            ax.legend(loc="best", fontsize=8)
         ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
