@@ -145,18 +145,12 @@ def octoprint_key_path(url: str) -> Path:
 
 def store_octoprint_key(url: str, api_key: str) -> Path:
     """Keep the key for `url` in the user's config folder (mode 600); returns the file."""
-    return save_api_key(octoprint_key_path(url), api_key)
+    return store_key("octoprint", url, api_key)
 
 
 def stored_octoprint_key(url: str) -> str | None:
     """The key kept for `url`, or None when there is none (or it is unusable: the user pastes it again)."""
-    path = octoprint_key_path(url)
-    if not path.exists():
-        return None
-    try:
-        return load_api_key(path)
-    except ApiKeyError:
-        return None
+    return stored_key("octoprint", url)
 
 
 def saved_target(choice: dict):
