@@ -36,6 +36,13 @@ class LatestSlot:
             self._cond.notify_all()
             return replaced
 
+    def replace(self, item):
+        """`put(item)`, returning the item it replaced (a dropped one), or None."""
+        with self._cond:
+            old = self._item if self._has else None
+            self.put(item)
+            return old
+
     def take(self, timeout: float | None = 0.0):
         """Remove and return the newest item, waiting up to `timeout` seconds (None: forever); None if empty."""
         if self.on_wait is not None and timeout != 0.0:

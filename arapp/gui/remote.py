@@ -34,6 +34,7 @@ from arapp.app.commands import Pause, Play, SetDisplaySize, SetModel, Step, Stop
 from arapp.app.live import LiveEngine, SourceInfo
 from arapp.app.processor import Shown
 from arapp.app.slots import LatestSlot
+from arapp.gui.frame_ring import FrameRing, RingReader
 from arapp.pipeline import FrameResult
 from tracking.camera import Camera
 from tracking.session import parse_anchors
@@ -94,6 +95,8 @@ class _Child:
                  full_frames: bool, display_size):
         self.conn = conn
         self.full_frames = full_frames
+        self.ring: FrameRing | None = None
+        self.rings: list[FrameRing] = []  # every ring made, unlinked when the child ends
         self.lock = threading.Lock()
         self.stop = threading.Event()
         self.engine = LiveEngine(spec, anchors=parse_anchors(anchors_json), speed=speed, loop=loop,
@@ -138,11 +141,27 @@ class _Child:
                 "captured_at": shown.captured_at, "processed_at": shown.processed_at,
                 "dropped": shown.dropped_capture, "w": bgra.shape[1], "h": bgra.shape[0],
                 "full": self.full_frames, **{k: r.extra[k] for k in STATE_KEYS}}
+        if not self.full_frames:
+            # the picture goes through shared memory; the pipe carries the metadata and the slot's number
+            if self.ring is None or not self.ring.fits(bgra):
+                if self.ring is not None:
+                    self.ring.shm.close()  # the UI has its own mapping; the name is unlinked at the end
+                self.ring = FrameRing(bgra.nbytes)
+                self.rings.append(self.ring)
+                self.send(("ring", self.ring.name, self.ring.slot_bytes, self.ring.count))
+            slot = self.ring.write(bgra)
+            if slot is None:
+                return  # the UI still holds every slot: this frame is dropped, a newer one follows
+            meta["slot"], meta["dropped"] = slot, meta["dropped"] + self.ring.dropped
+            meta["send_at"] = time.perf_counter()
+            self.send(("frame", meta))
+            return
         blobs = [memoryview(np.ascontiguousarray(bgra)).cast("B")]
         if self.full_frames:
             for img in (r.image, shown.frame):
                 meta.setdefault("full_shape", list(img.shape))
                 blobs.append(memoryview(np.ascontiguousarray(img)).cast("B"))
+        meta["send_at"] = time.perf_counter()
         self.send(("frame", meta), *blobs)
 
     def run(self) -> None:
@@ -158,17 +177,29 @@ class _Child:
             self.send_frame(shown)
         engine.stop(wait=10.0)
 
+    def close_rings(self) -> None:
+        for ring in self.rings:
+            try:
+                ring.close()
+            except (OSError, BufferError):
+                pass  # closed already (replaced by a bigger ring)
+        self.rings = []
+
 
 def child_main(conn, spec, anchors_json, speed, loop, playing, full_frames, display_size) -> None:
     """Entry point of the child process."""
+    child = None
     try:
-        _Child(conn, spec, anchors_json, speed, loop, playing, full_frames, display_size).run()
+        child = _Child(conn, spec, anchors_json, speed, loop, playing, full_frames, display_size)
+        child.run()
     except Exception as exc:  # noqa: BLE001 - last resort: tell the UI why the process ends
         try:
             conn.send(("error", "The tracking process failed", f"{exc}\n{traceback.format_exc(limit=3)}"))
         except (OSError, EOFError):
             pass
     finally:
+        if child is not None:
+            child.close_rings()
         conn.close()
 
 
@@ -207,7 +238,9 @@ class RemoteEngine(EngineSignals):
         self.process = None
         self.conn = None
         self._receiver = None
-        self._events = {"opened": self._opened, "error": self.error.emit, "ended": self._ended,
+        self._ring: RingReader | None = None
+        self._taken: Shown | None = None  # the frame the UI took last (shown now): its slot is held
+        self._events = {"ring": self._attach_ring, "opened": self._opened, "error": self.error.emit, "ended": self._ended,
                         "recorded": self.recorded.emit, "toolpaths": self.toolpaths_shown.emit}
 
     # -- lifecycle ---------------------------------------------------------------------
@@ -256,11 +289,33 @@ class RemoteEngine(EngineSignals):
         self._playing = False
         self.ended.emit()
 
+    def _attach_ring(self, name: str, slot_bytes: int, count: int) -> None:
+        try:
+            self._ring = RingReader(name, slot_bytes, count)
+        except FileNotFoundError:
+            self._ring = None  # the child ended meanwhile and unlinked it; its frames are not shown
+
+    @staticmethod
+    def _release(shown) -> None:
+        held = getattr(shown, "ring_slot", None) if shown is not None else None
+        if held is not None:
+            shown.ring_slot = None
+            held[0].release(held[1])
+
     def _frame(self, conn, meta: dict) -> None:
-        data = conn.recv_bytes()
-        full = [conn.recv_bytes() for _ in range(2)] if meta.get("full") else []
         w, h = meta["w"], meta["h"]
-        bgra = np.frombuffer(data, np.uint8).reshape(h, w, 4)
+        held = None
+        if "slot" in meta:
+            if self._ring is None:
+                return
+            bgra = self._ring.view(meta["slot"], (h, w, 4))  # in place, no copy
+            held = (self._ring, meta["slot"])
+            full = []
+        else:
+            data = conn.recv_bytes()
+            full = [conn.recv_bytes() for _ in range(2)] if meta.get("full") else []
+            bgra = np.frombuffer(data, np.uint8).reshape(h, w, 4)
+        received = time.perf_counter()
         q = QImage(bgra.data, w, h, w * 4, QImage.Format.Format_RGB32)
         q._keep = bgra
         image = frame = None
@@ -272,8 +327,13 @@ class RemoteEngine(EngineSignals):
         extra = {k: meta[k] for k in STATE_KEYS}
         result = FrameResult(meta["index"], meta["t"], pose, meta["state"], meta["markers"], meta["inliers"],
                              meta["ms_track"], meta["ms_render"], image, extra)
-        self.shown.put(Shown(result, bgra, frame, meta["captured_at"], meta["processed_at"],
-                             dropped_capture=meta["dropped"], qimage=q))
+        shown = Shown(result, bgra, frame, meta["captured_at"], meta["processed_at"],
+                      dropped_capture=meta["dropped"], qimage=q)
+        shown.ring_slot = held
+        # hand-over timing marks (perf_counter seconds, one clock for both processes on Linux):
+        # sent by the child, received here, taken by the UI thread (set in take)
+        shown.stages = {"sent": meta.get("send_at", received), "received": received}
+        self._release(self.shown.replace(shown))  # a frame nobody took is dropped: its slot is free again
         if not self._notify_pending.is_set():
             self._notify_pending.set()
             self.frame_ready.emit()
@@ -319,6 +379,10 @@ class RemoteEngine(EngineSignals):
         shown = self.shown.take()
         if shown is not None:
             shown.dropped_paint = self.shown.dropped
+            # the UI now shows this frame instead of the previous one, whose slot the child may reuse
+            self._release(self._taken)
+            self._taken = shown
+            shown.stages["taken"] = time.perf_counter()
         return shown
 
     @property

@@ -41,7 +41,11 @@ class VideoView(QWidget):
     def set_image(self, image: QImage | None) -> None:
         self._image = image
         self._new = image is not None
-        self.update()
+        if self._new and self.isVisible():
+            # paint now, not at the event loop's next turn: a new frame's latency ends when it is on screen
+            self.repaint()
+        else:
+            self.update()
 
     def image(self) -> QImage | None:
         return self._image
