@@ -21,6 +21,7 @@ tessellates it itself).
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
 from multiprocessing import forkserver
 import threading
 import time
@@ -43,6 +44,7 @@ PRELOAD = ["numpy", "cv2", "arapp.pipeline", "arapp.app.live", "tracking.sources
            "arapp.geometry.model", "trimesh"]
 # the model state each frame carries back (LiveEngine.state)
 STATE_KEYS = ("mesh_faces", "model_gen", "mode", "resets", "toolpaths", "discovery")
+CHILD_NICE = 5  # the pipeline process's niceness above the UI's
 _context = None
 _context_lock = threading.Lock()
 
@@ -190,6 +192,11 @@ def child_main(conn, spec, anchors_json, speed, loop, playing, full_frames, disp
     """Entry point of the child process."""
     child = None
     try:
+        try:
+            # the UI process comes first for the CPU: a frame late by a few ms costs less than a UI that stalls
+            os.nice(CHILD_NICE)
+        except OSError:
+            pass
         child = _Child(conn, spec, anchors_json, speed, loop, playing, full_frames, display_size)
         child.run()
     except Exception as exc:  # noqa: BLE001 - last resort: tell the UI why the process ends
