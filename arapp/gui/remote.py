@@ -8,9 +8,12 @@ the UI thread stalls for hundreds of milliseconds on a loaded 2-core machine
 The child (started from a fork server that has the heavy modules imported
 already, so it starts in a fraction of a second) runs the same `Player` and
 `Processor` threads as `workers.Engine` (an `arapp.app.live.LiveEngine`). Finished frames, already scaled to
-the view and converted to the screen's 32-bit format, come back over a pipe;
-a receiver thread in the UI process wraps them as QImages into a
-latest-frame-wins slot and signals the UI thread, which only paints.
+the view and converted to the screen's 32-bit format, come back through shared memory
+(`arapp.gui.frame_ring`: the pipe carries only their metadata and slot number);
+a receiver thread in the UI process wraps each slot in place as a QImage into a
+latest-frame-wins slot and signals the UI thread, which only paints. A frame
+replaced before the UI took it frees its slot at once; the frame shown frees
+its slot when the next one is taken.
 Commands go the other way as the `arapp.app.commands` dataclasses themselves
 (a model travels as its path plus control-point edits; the child loads and
 tessellates it itself).
@@ -247,8 +250,9 @@ class RemoteEngine(EngineSignals):
         self._receiver = None
         self._ring: RingReader | None = None
         self._taken: Shown | None = None  # the frame the UI took last (shown now): its slot is held
-        self._events = {"ring": self._attach_ring, "opened": self._opened, "error": self.error.emit, "ended": self._ended,
-                        "recorded": self.recorded.emit, "toolpaths": self.toolpaths_shown.emit}
+        self._events = {"ring": self._attach_ring, "opened": self._opened, "error": self.error.emit,
+                        "ended": self._ended, "recorded": self.recorded.emit,
+                        "toolpaths": self.toolpaths_shown.emit}
 
     # -- lifecycle ---------------------------------------------------------------------
     def start(self) -> None:
