@@ -42,6 +42,17 @@ class MoonrakerTarget:
     api_key_file: str = ""
 
 
+@dataclass(frozen=True)
+class PrusaLinkTarget:
+    """A Prusa printer behind PrusaLink, and the file of mode 600 holding its API key, or its digest user and
+    the file holding that user's password."""
+
+    url: str
+    api_key_file: str = ""
+    user: str = ""
+    password_file: str = ""
+
+
 def _serial(target: SerialTarget, profile, job_path) -> PrintLink:
     from .serial_link import SerialPrinter  # each backend's dependencies load only when it is chosen
 
@@ -73,12 +84,31 @@ def _moonraker(target: MoonrakerTarget, profile, job_path) -> PrintLink:
     return MoonrakerLink(target.url, key, job_path=job_path)
 
 
+def _prusalink(target: PrusaLinkTarget, profile, job_path) -> PrintLink:
+    from .prusalink import PrusaLinkLink
+    from .webapi import ApiKeyError, load_api_key
+
+    if not target.url:
+        raise ValueError("give the PrusaLink URL (e.g. http://prusa-mk4.local)")
+    if target.api_key_file:
+        return PrusaLinkLink(target.url, load_api_key(target.api_key_file), job_path=job_path)
+    if not (target.user and target.password_file):
+        raise ValueError("--prusalink needs --api-key-file F, or --prusalink-user NAME and --password-file F "
+                         "(the password in a file of mode 600)")
+    try:
+        password = load_api_key(target.password_file)
+    except ApiKeyError as exc:
+        raise ApiKeyError(str(exc).replace("API key file", "password file")) from None
+    return PrusaLinkLink(target.url, user=target.user, password=password, job_path=job_path)
+
+
 _MAKERS: dict[type, Callable] = {SerialTarget: _serial, OctoPrintTarget: _octoprint}
 _MAKERS[MoonrakerTarget] = _moonraker
+_MAKERS[PrusaLinkTarget] = _prusalink
 
 
 def make_link(target, *, profile=None, job_path=None) -> PrintLink:
-    """The link for `target` (SerialTarget, OctoPrintTarget, MoonrakerTarget, ...: `_MAKERS`), not connected yet.
+    """The link for `target` (SerialTarget, OctoPrintTarget, MoonrakerTarget, PrusaLinkTarget, ...: `_MAKERS`), not connected yet.
 
     profile: the printer profile (its bed height caps a cancel's nozzle lift);
     job_path: where the job state is kept. Raises ValueError for an incomplete
