@@ -164,6 +164,29 @@ def test_credentials(prusalink_server, tmp_path):
     assert repr(PrusaLinkLink(prusalink_server.url, "secret-key-xyz")) == f"PrusaLinkLink({prusalink_server.url!r})"
 
 
+def test_arapp_print_cli_through_prusalink(prusalink_server, tmp_path, capsys):
+    from arapp.cli import main
+
+    fw = prusalink_server.firmware
+    lines = job(30)
+    gcode = tmp_path / "cli-part.gcode"
+    gcode.write_text("\n".join(lines) + "\n")
+    pw = save_api_key(tmp_path / "pw", PASSWORD)
+    since = len(fw.executed)
+    rc = main(["print", str(gcode), "--prusalink", prusalink_server.url, "--prusalink-user", USER,
+               "--password-file", str(pw)])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    assert out.out.startswith(f"done: {len(commands(lines))}/{len(commands(lines))} lines")
+    assert ran(fw, since, lines) == commands(lines)
+    assert PASSWORD not in out.out + out.err
+    # a password given in the URL is refused in one line, never echoed
+    rc = main(["print", str(gcode), "--prusalink", prusalink_server.url.replace("//", f"//{USER}:{PASSWORD}@"),
+               "--api-key-file", str(pw)])
+    err = capsys.readouterr().err
+    assert rc == 2 and "holds a user name or password" in err and PASSWORD not in err and "Traceback" not in err
+
+
 def test_temperatures_reach_the_app(prusalink_server, tmp_path):
     # last in the file: PrusaLink turns the firmware's temperature reports on (M155) up to 70 s after it starts
     prusalink_server.wait_state(temperatures=True, timeout=90)

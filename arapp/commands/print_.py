@@ -24,6 +24,14 @@ def add_arguments(parser):
     link.add_argument("--moonraker", metavar="URL",
                       help="Moonraker server of a Klipper printer, e.g. http://mainsailos.local or http://host:7125 "
                            "(no key needed from one of its trusted_clients)")
+    link.add_argument("--prusalink", metavar="URL",
+                      help="PrusaLink of a Prusa printer (MK4, MINI, XL, CORE One, or a Pi on an MK3S), "
+                           "e.g. http://prusa-mk4.local; with --api-key-file F, or --prusalink-user NAME and "
+                           "--password-file F")
+    link.add_argument("--prusalink-user", metavar="NAME", default="",
+                      help="PrusaLink user for HTTP digest (the printer's Settings > Network > PrusaLink)")
+    link.add_argument("--password-file", metavar="F", default="",
+                      help="file holding that user's PrusaLink password (mode 600; never on the command line)")
     link.add_argument("--api-key-file", metavar="F",
                       help="file holding the OctoPrint, Moonraker or PrusaLink API key (mode 600)")
     link.add_argument("--save-key", metavar="F",
@@ -72,10 +80,13 @@ def _read_key_interactively(what: str = "API key") -> str:
 
 # The network links: flag -> (name, target maker); a target's key file may be "" where the server allows it.
 def _network_links():
-    from arapp.printing.link.factory import MoonrakerTarget, OctoPrintTarget
+    from arapp.printing.link.factory import MoonrakerTarget, OctoPrintTarget, PrusaLinkTarget
 
     return {"octoprint": ("OctoPrint", lambda args: OctoPrintTarget(args.octoprint, args.api_key_file)),
-            "moonraker": ("Moonraker", lambda args: MoonrakerTarget(args.moonraker, args.api_key_file or ""))}
+            "moonraker": ("Moonraker", lambda args: MoonrakerTarget(args.moonraker, args.api_key_file or "")),
+            "prusalink": ("PrusaLink", lambda args: PrusaLinkTarget(
+                args.prusalink, args.api_key_file or "", getattr(args, "prusalink_user", "") or "",
+                getattr(args, "password_file", "") or ""))}
 
 
 def _chosen_links(args) -> list[str]:
