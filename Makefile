@@ -12,7 +12,10 @@ MOON   := .venv-moonraker
 MOON_STAMP := $(MOON)/.installed
 KLIPPY := .venv-klippy
 KLIPPY_STAMP := $(KLIPPY)/.installed
-SERVER_STAMPS := $(OCTO_STAMP) $(MOON_STAMP) $(KLIPPY_STAMP)
+# The real PrusaLink, for the PrusaLink-link tests, in its own environment.
+PRUSALINK := .venv-prusalink
+PRUSALINK_STAMP := $(PRUSALINK)/.installed
+SERVER_STAMPS := $(OCTO_STAMP) $(MOON_STAMP) $(KLIPPY_STAMP) $(PRUSALINK_STAMP)
 
 # `make test` runs the suite in TEST_WORKERS processes (pytest-xdist), one per core of CI's 2-core machine;
 # --dist loadfile keeps each test file on one worker, so its module fixtures are built once. 0: one process.
@@ -57,6 +60,14 @@ $(KLIPPY_STAMP): requirements-klippy-server.txt scripts/system-deps.sh
 	$(KLIPPY)/bin/python -m pip install -q -r requirements-klippy-server.txt
 	touch $(KLIPPY_STAMP)
 
+# python-prctl compiles against libcap; PrusaLink loads libturbojpeg at import and libmagic for uploads.
+$(PRUSALINK_STAMP): requirements-prusalink-server.txt scripts/system-deps.sh
+	./scripts/system-deps.sh gcc libcap-dev libturbojpeg0 libmagic1
+	test -x $(PRUSALINK)/bin/python || $(PYTHON) -m venv $(PRUSALINK)
+	$(PRUSALINK)/bin/python -m pip install -q --upgrade pip
+	$(PRUSALINK)/bin/python -m pip install -q -r requirements-prusalink-server.txt
+	touch $(PRUSALINK_STAMP)
+
 demo: $(STAMP)
 	$(ARAPP) demo --out out/demo
 
@@ -67,4 +78,4 @@ bench: $(STAMP)
 	$(PY) benchmarks/run_all.py --out BENCHMARKS.md $(if $(ONLY),--only $(ONLY) --merge)
 
 clean:
-	rm -rf $(VENV) $(OCTO) $(MOON) $(KLIPPY) out
+	rm -rf $(VENV) $(OCTO) $(MOON) $(KLIPPY) $(PRUSALINK) .prusalink-test out
