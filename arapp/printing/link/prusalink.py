@@ -310,6 +310,18 @@ class PrusaLinkLink(PrintLink):
                                   message=f"waiting for the printer to leave {printer_state} (the last job's end)"))
             time.sleep(self.poll_interval)
 
+    def _heaters_left_on(self, wait_s: float = 10.0) -> list[str]:
+        """The heaters ("T", "B") that still have a target after a stop. PrusaLink reads the printer's
+        temperatures on its own schedule, so its status may show the targets of before the firmware's stop
+        sequence for a few seconds: look again (4 times a second, at most `wait_s`) before saying so."""
+        deadline = time.monotonic() + wait_s
+        while True:
+            hot = [k for k, (_, target) in self.temperatures.items() if target]
+            if not hot or time.monotonic() > deadline:
+                return hot
+            time.sleep(self.poll_interval)
+            self.read_status()
+
     def _ended(self, state: JobState, printer_state: str, cancelling: bool, fp: FileProgress, progress,
                elapsed: float) -> JobState:
         if printer_state == "ERROR":
@@ -324,7 +336,7 @@ class PrusaLinkLink(PrintLink):
             state.status = CANCELLED
             # the firmware's stop sequence turns the heaters off; PrusaLink's API sends no G-code of ours, so
             # all the link can do is say when a heater still has a target
-            hot = [k for k, (_, target) in self.temperatures.items() if target]
+            hot = self._heaters_left_on()
             if hot:
                 state.message = (f"the printer still reports heater targets after the stop ({', '.join(hot)}); "
                                  "turn them off on its screen")
