@@ -44,7 +44,8 @@ from .base import (
     eta,
 )
 from .job import JobState, Program, new_state
-from .webapi import API_KEY_HEADER, FileProgress, SecretSession, check_base_url, gcode_bytes, server_message
+from .webapi import (API_KEY_HEADER, FileProgress, SecretSession, check_base_url, finish_job, gcode_bytes,
+                     server_message)
 
 log = logging.getLogger("arapp.printing.prusalink")
 
@@ -344,17 +345,7 @@ class PrusaLinkLink(PrintLink):
         return state
 
     def _finish(self, state: JobState, progress, elapsed: float) -> None:
-        if self.job_path:
-            state.save(self.job_path)
-        if progress is not None:
-            total = state.commands_total
-            progress(Progress(
-                state=state.status, lines_done=state.commands_done, lines_total=total,
-                layer=state.layer, layer_count=state.layer_count,
-                percent=100.0 * state.commands_done / total if total else 100.0,
-                elapsed_s=elapsed, eta_s=0.0 if state.status == DONE else None,
-                temperatures=dict(self.temperatures), message=state.message,
-            ))
+        finish_job(state, self.job_path, progress, elapsed, self.temperatures)
 
 
 def check_prusalink(url: str, api_key: str | None = None, *, user: str | None = None, password: str | None = None,

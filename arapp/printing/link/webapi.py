@@ -21,10 +21,11 @@ from urllib.parse import urlsplit, urlunsplit
 
 import requests
 
-from .job import Program
+from .base import DONE, Progress
+from .job import JobState, Program
 
 __all__ = ["API_KEY_HEADER", "ApiKeyError", "save_api_key", "load_api_key", "redact_url", "check_base_url",
-           "SecretSession", "server_message", "FileProgress", "gcode_bytes"]
+           "SecretSession", "server_message", "FileProgress", "gcode_bytes", "finish_job"]
 
 
 class ApiKeyError(ValueError):
@@ -171,3 +172,19 @@ class FileProgress:
     def at_fraction(self, fraction: float) -> tuple[int, int]:
         """(commands done, layer) at `fraction` (0..1) of the file's bytes."""
         return self.at(max(0.0, min(1.0, float(fraction))) * self.size)
+
+
+def finish_job(state: JobState, job_path: str | None, progress, elapsed: float, temperatures: dict) -> None:
+    """How a server link ends a job: the final state saved to `job_path` (when there is one) and the last
+    Progress report (100 % of the lines done on a finished job, the stop's own share otherwise)."""
+    if job_path:
+        state.save(job_path)
+    if progress is not None:
+        total = state.commands_total
+        progress(Progress(
+            state=state.status, lines_done=state.commands_done, lines_total=total,
+            layer=state.layer, layer_count=state.layer_count,
+            percent=100.0 * state.commands_done / total if total else 100.0,
+            elapsed_s=elapsed, eta_s=0.0 if state.status == DONE else None,
+            temperatures=dict(temperatures), message=state.message,
+        ))
