@@ -16,8 +16,9 @@ How a crop of the overlay is occluded (`visibility`):
 3. a model pixel is visible where its depth is at most the scene's plus a tolerance that grows with the
    distance as stereo noise does (`tolerance_m + noise_per_m2 * z^2`); unknown scene depth (0) and
    pixels without model depth (a contact shadow) leave the model visible;
-4. the hard mask is opened toward the visible side by `shrink_px` (stereo depth edges bulge a pixel or two
-   past the object: foreground fattening) and feathered by a Gaussian of `feather_px`: a soft edge.
+4. the hidden part may be eroded or grown by `shrink_px` (stereo depth edges bulge a pixel past the
+   object: foreground fattening; tuned to 0 on the tuning recordings) and the mask is feathered by a
+   Gaussian of `feather_px`: a soft edge of about two pixels.
 
 The premultiplied crop is multiplied by that alpha (`apply_alpha`); `Occluder` packages it as the callable
 `OverlayRenderer.draw(..., occlusion=)` takes. The model's depth comes from the renderer's depth buffer
@@ -44,8 +45,8 @@ class OcclusionParams:
     noise_per_m2: float = 0.004  # plus this times z^2 (metres): stereo depth noise grows with the square of z
     plane_tolerance_m: float = 0.001  # plane mode: the plane is exact, only the renderer's depth precision
     feather_px: float = 1.0  # Gaussian sigma of the soft edge, pixels
-    shrink_px: int = 1  # the occluder's mask is eroded by this much (foreground fattening of stereo depth)
-    median_px: int = 5  # 0, 3 or 5: median filter of the scene depth (flying pixels, speckle)
+    shrink_px: int = 0  # the occluder's mask eroded (> 0) or grown (< 0) by this much: tuned to 0
+    median_px: int = 3  # 0, 3 or 5: median filter of the scene depth (flying pixels, speckle)
     margin_px: int = 48  # scene depth read this far around the crop (hole filling along rows reaches out)
 
 
@@ -97,10 +98,11 @@ def visibility(model_z: np.ndarray, scene_z: np.ndarray, params: OcclusionParams
     s = scene_z
     limit = s + np.float32(tol) + np.float32(k) * s * s
     hidden = (s > 0) & (model_z > limit) & np.isfinite(model_z)
-    if params.shrink_px > 0 and hidden.any():
-        r = int(params.shrink_px)
-        hidden = cv2.erode(hidden.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)),
-                           borderType=cv2.BORDER_REPLICATE).view(bool)
+    if params.shrink_px != 0 and hidden.any():
+        r = abs(int(params.shrink_px))
+        op = cv2.erode if params.shrink_px > 0 else cv2.dilate  # negative: grow the occluder instead
+        hidden = op(hidden.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)),
+                    borderType=cv2.BORDER_REPLICATE).view(bool)
     alpha = 1.0 - hidden.astype(np.float32)
     if params.feather_px > 0 and hidden.any():
         alpha = cv2.GaussianBlur(alpha, (0, 0), float(params.feather_px), borderType=cv2.BORDER_REPLICATE)

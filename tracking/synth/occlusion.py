@@ -152,7 +152,7 @@ class OcclusionRenderer:
             for b in (-0.028, 0.0, 0.028):
                 out.append((palm + a * u + b * v, 0.02))
         for j, length in enumerate((0.062, 0.072, 0.068, 0.055)):
-            base = palm + 0.04 * u + (j - 1.5) * 0.019 * v
+            base = palm + 0.04 * u + (j - 1.5) * 0.022 * v  # 3 mm apart: gaps the depth must resolve
             chain(base, base + length * u, 0.0095, 0.0085, 0.005)
         tb = palm + 0.015 * u - 0.045 * v
         chain(tb, tb + 0.045 * (0.6 * u - 0.8 * v), 0.012, 0.01, 0.006)

@@ -529,7 +529,9 @@ def occlusion_scene(name: str, width: int | None = None, height: int | None = No
     """A copy of occlusion preset `name`, optionally smaller or shorter (tests render 320x240 in a second)."""
     data = copy.deepcopy(OCCLUSION[name])
     if width is not None:
+        scale = int(width) / data["camera"]["width"]
         data["camera"]["width"], data["camera"]["height"] = int(width), int(height)
+        data["desk"]["ppm"] = round(data["desk"]["ppm"] * min(1.0, scale * 1.2))  # the texture as fine as seen
     if duration is not None:
         data["duration"] = float(duration)
         data["occlusion"]["occluder"]["start"] = 0.1 * duration
