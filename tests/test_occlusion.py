@@ -245,3 +245,66 @@ def test_replay_runs_with_occlusion_from_the_recordings_depth(occlusion_recordin
                    "--occlusion", mode])
         assert rc == 0, capsys.readouterr()
         assert (tmp_path / mode / "overlay.mp4").stat().st_size > 0
+
+
+# -- app model and GUI -----------------------------------------------------------------------
+class _Engine:
+    def __init__(self, spec, **options):
+        self.sent, self.state = [], {}
+
+    def send(self, command):
+        self.sent.append(command)
+
+    def start(self):
+        pass
+
+    def stop(self, wait=0.0):
+        pass
+
+    def submit(self, fn):
+        fn(self.pipe)
+
+
+def test_the_session_keeps_the_occlusion_choice_and_tells_the_pipeline(occlusion_recordings):
+    from arapp.app import commands as cmd
+    from arapp.app.session import MemorySettings, Session
+    from arapp.pipeline import Pipeline
+    from tracking.session import load_session
+
+    engines, settings = [], MemorySettings()
+    session = Session(lambda spec, **o: engines.append(_Engine(spec, **o)) or engines[-1], settings)
+    assert session.occlusion == "auto"
+    session.open_source(str(occlusion_recordings["test_occlusion_object"]))
+    assert not [c for c in engines[-1].sent if isinstance(c, cmd.SetOcclusion)]  # auto: the pipeline's default
+    session.set_occlusion("plane")
+    sent = [c for c in engines[-1].sent if isinstance(c, cmd.SetOcclusion)]
+    assert [c.mode for c in sent] == ["plane"]
+    with pytest.raises(ValueError, match="auto, off, depth, plane"):
+        session.set_occlusion("x-ray")
+    # the command on a real pipeline; auto is None there (depth when a frame has depth)
+    s = load_session(occlusion_recordings["test_occlusion_object"])
+    engine = engines[-1]
+    engine.pipe = Pipeline(s.camera, s.anchors, draw=False)
+    try:
+        sent[0].apply(engine)
+        assert engine.pipe.occlusion_for(None) == "plane" and engine.state["occlusion"] == "plane"
+        cmd.SetOcclusion(None).apply(engine)
+        assert engine.pipe.occlusion_for(np.zeros((1, 1), np.float32)) == "depth"
+    finally:
+        engine.pipe.close()
+    # a new session (the app started again) comes back with the choice
+    again = Session(lambda spec, **o: engines.append(_Engine(spec, **o)) or engines[-1], settings)
+    assert again.occlusion == "plane"
+    again.open_source(str(occlusion_recordings["test_occlusion_object"]))
+    assert [c.mode for c in engines[-1].sent if isinstance(c, cmd.SetOcclusion)] == ["plane"]
+
+
+def test_the_model_panel_offers_the_occlusion_modes(qtbot):
+    from arapp.gui.panels.model import ModelPanel
+
+    panel = ModelPanel()
+    qtbot.addWidget(panel)
+    assert [panel.occlusion.itemText(i) for i in range(panel.occlusion.count())] == ["auto", "off", "depth", "plane"]
+    with qtbot.waitSignal(panel.occlusion_changed) as sig:
+        panel.occlusion.setCurrentText("depth")
+    assert sig.args == ["depth"]
