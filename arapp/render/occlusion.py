@@ -11,7 +11,7 @@ How a crop of the overlay is occluded (`visibility`):
 1. the scene depth around the crop is taken with a margin; holes (0: no stereo match, out of range) are
    filled along each row from the *farther* of the two valid neighbours (`fill_holes`): stereo depth
    loses the background beside a near object's edge (the strip one camera of the pair cannot see), and
-   the background is what lies there; holes with no valid pixel in the row stay unknown;
+   the background is what lies there; holes open to the window's edge on one side stay unknown;
 2. a 5x5 median removes flying pixels at depth edges and speckle;
 3. a model pixel is visible where its depth is at most the scene's plus a tolerance that grows with the
    distance as stereo noise does (`tolerance_m + noise_per_m2 * z^2`); unknown scene depth (0) and
@@ -47,7 +47,8 @@ class OcclusionParams:
     feather_px: float = 1.0  # Gaussian sigma of the soft edge, pixels
     shrink_px: int = 0  # the occluder's mask eroded (> 0) or grown (< 0) by this much: tuned to 0
     median_px: int = 3  # 0, 3 or 5: median filter of the scene depth (flying pixels, speckle)
-    margin_px: int = 48  # scene depth read this far around the crop (hole filling along rows reaches out)
+    margin_px: int = 64  # scene depth read this far around the crop (hole filling along rows reaches out)
+    fill: bool = True  # fill holes from the farther side (False: holes are unknown, the model drawn there)
 
 
 DEFAULT_PARAMS = OcclusionParams()
@@ -62,19 +63,29 @@ def check_mode(mode: str) -> str:
 
 def fill_holes(depth: np.ndarray) -> np.ndarray:
     """Depth (h, w) float32 metres with holes (<= 0) filled along each row by the farther of the nearest
-    valid pixels to their left and right; a row with no valid pixel stays 0."""
+    valid pixels to their left and right; a hole with no valid pixel on one side (it reaches the edge of
+    the window) stays 0, unknown: beside a near object that side may be the background it hides."""
     d = np.ascontiguousarray(depth, np.float32)
-    valid = d > 0
-    if valid.all():
+    hole = d <= 0
+    if not hole.any():
         return d
     h, w = d.shape
-    cols = np.arange(w, dtype=np.int32)[None, :]
-    left = np.maximum.accumulate(np.where(valid, cols, -1), axis=1)
-    right = np.minimum.accumulate(np.where(valid, cols, w)[:, ::-1], axis=1)[:, ::-1]
-    rows = np.arange(h)[:, None]
-    lv = np.where(left >= 0, d[rows, np.clip(left, 0, w - 1)], 0.0)
-    rv = np.where(right < w, d[rows, np.clip(right, 0, w - 1)], 0.0)
-    return np.where(valid, d, np.maximum(lv, rv)).astype(np.float32)
+    # runs of holes along the rows, found in one pass over the rows laid end to end (a False column
+    # between rows keeps runs from wrapping); each run takes one value, repeated over its pixels
+    padded = np.zeros((h, w + 2), np.int8)
+    padded[:, 1:-1] = hole
+    step = np.diff(padded.ravel())
+    first = np.flatnonzero(step == 1) + 1  # padded flat index of each run's first hole pixel
+    last = np.flatnonzero(step == -1)  # ... and of its last
+    row = first // (w + 2)
+    c0, c1 = first % (w + 2) - 1, last % (w + 2) - 1
+    closed = (c0 > 0) & (c1 < w - 1)
+    lv = d[row, np.maximum(c0 - 1, 0)]
+    rv = d[row, np.minimum(c1 + 1, w - 1)]
+    value = np.where(closed, np.maximum(lv, rv), np.float32(0.0)).astype(np.float32)
+    out = d.copy()
+    out[hole] = np.repeat(value, c1 - c0 + 1)  # boolean indexing is row-major, as the runs are
+    return out
 
 
 def scene_window(depth: np.ndarray, x0: int, y0: int, w: int, h: int, margin: int):
@@ -95,23 +106,30 @@ def visibility(model_z: np.ndarray, scene_z: np.ndarray, params: OcclusionParams
     """
     tol = params.tolerance_m if tolerance_m is None else tolerance_m
     k = params.noise_per_m2 if noise_per_m2 is None else noise_per_m2
-    s = scene_z
-    limit = s + np.float32(tol) + np.float32(k) * s * s
-    hidden = (s > 0) & (model_z > limit) & np.isfinite(model_z)
-    if params.shrink_px != 0 and hidden.any():
+    s = np.ascontiguousarray(scene_z, np.float32)
+    m = np.ascontiguousarray(model_z, np.float32)
+    # OpenCV's element-wise operations (vectorised, no temporaries of Python floats): this runs per frame
+    limit = cv2.add(cv2.multiply(s, s, scale=float(k)), s)
+    limit = cv2.add(limit, float(tol))
+    hidden = cv2.compare(m, limit, cv2.CMP_GT)  # 255 where the model is behind the scene
+    hidden = cv2.bitwise_and(hidden, cv2.compare(s, 0.0, cv2.CMP_GT))  # scene depth known
+    hidden = cv2.bitwise_and(hidden, cv2.compare(m, float(np.finfo(np.float32).max), cv2.CMP_LT))  # model there
+    if not hidden.any():
+        return np.ones(s.shape, np.float32)
+    if params.shrink_px != 0:
         r = abs(int(params.shrink_px))
         op = cv2.erode if params.shrink_px > 0 else cv2.dilate  # negative: grow the occluder instead
-        hidden = op(hidden.view(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)),
-                    borderType=cv2.BORDER_REPLICATE).view(bool)
-    alpha = 1.0 - hidden.astype(np.float32)
-    if params.feather_px > 0 and hidden.any():
-        alpha = cv2.GaussianBlur(alpha, (0, 0), float(params.feather_px), borderType=cv2.BORDER_REPLICATE)
-    return alpha
+        hidden = op(hidden, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * r + 1, 2 * r + 1)),
+                    borderType=cv2.BORDER_REPLICATE)
+    drawn = cv2.bitwise_not(hidden)
+    if params.feather_px > 0:
+        drawn = cv2.GaussianBlur(drawn, (0, 0), float(params.feather_px), borderType=cv2.BORDER_REPLICATE)
+    return cv2.multiply(drawn, 1.0 / 255.0, dtype=cv2.CV_32F)
 
 
 def prepare_scene(depth_window: np.ndarray, params: OcclusionParams = DEFAULT_PARAMS) -> np.ndarray:
     """Hole filling and the median filter of a scene depth window (float32 metres, 0 = none)."""
-    d = fill_holes(depth_window)
+    d = fill_holes(depth_window) if params.fill else np.ascontiguousarray(depth_window, np.float32)
     m = int(params.median_px)
     if m in (3, 5) and min(d.shape) >= m:
         d = cv2.medianBlur(d, m)
@@ -119,9 +137,9 @@ def prepare_scene(depth_window: np.ndarray, params: OcclusionParams = DEFAULT_PA
 
 
 def apply_alpha(premul_rgba: np.ndarray, alpha: np.ndarray) -> np.ndarray:
-    """A premultiplied RGBA uint8 crop with every channel multiplied by `alpha` (h, w) 0..1."""
-    out = premul_rgba.astype(np.float32) * alpha[..., None]
-    return (out + 0.5).astype(np.uint8)
+    """A premultiplied RGBA uint8 crop with every channel multiplied by `alpha` (h, w) 0..1 (rounded)."""
+    a8 = cv2.convertScaleAbs(alpha, alpha=255.0)  # saturating, rounded
+    return cv2.multiply(premul_rgba, cv2.merge([a8, a8, a8, a8]), scale=1.0 / 255.0)
 
 
 class PlaneDepth:
