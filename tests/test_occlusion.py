@@ -88,6 +88,10 @@ def test_tuning_and_test_scenes_use_different_seeds():
     seeds = lambda names: {occlusion_scene(n)["seed"] for n in names} | {occlusion_scene(n)["desk"]["seed"]  # noqa: E731
                                                                         for n in names}
     assert not seeds(OCCLUSION_TUNING) & seeds(OCCLUSION_TEST)
+    from tracking.synth.presets import EXTRA_TUNING, HELD, PRESETS
+
+    others = [p for group in (PRESETS, EXTRA_TUNING, HELD) for p in group.values()]
+    assert not seeds(OCCLUSION_TEST) & ({p["seed"] for p in others} | {p["desk"]["seed"] for p in others})
 
 
 def test_recording_has_depth_masks_and_model(occlusion_recordings):
