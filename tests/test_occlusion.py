@@ -313,3 +313,31 @@ def test_the_model_panel_offers_the_occlusion_modes(qtbot):
     with qtbot.waitSignal(panel.occlusion_changed) as sig:
         panel.occlusion.setCurrentText("depth")
     assert sig.args == ["depth"]
+
+
+def test_print_preview_toolpaths_are_occluded_too():
+    """The pipeline hands the same occluder to the toolpath draw (the AR print preview): toolpaths behind a
+    nearer surface are not drawn, in front of a farther one they are."""
+    from arapp.pipeline import Pipeline
+    from arapp.render.modes import LineSet
+    from tracking.camera import Camera
+    from tracking.session import parse_anchors
+
+    cam = Camera(np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]]), None, 320, 240)
+    anchors = parse_anchors([{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0, "length": 0.05}])
+    pipe = Pipeline(cam, anchors, draw=True, status_line=False)
+    world_from_camera = np.diag([1.0, -1.0, -1.0, 1.0])  # looking straight down at the plane from 0.4 m
+    world_from_camera[2, 3] = 0.4
+    lines = LineSet([np.array([[-0.05, y, 0.0], [0.05, y, 0.0]]) for y in np.linspace(-0.03, 0.03, 7)],
+                    (1.0, 0.5, 0.0, 1.0), 3.0)
+    pipe.set_toolpaths([lines], np.eye(4))
+    frame = np.zeros((240, 320, 3), np.uint8)
+    try:
+        near = pipe.draw_overlay(frame, world_from_camera, np.full((240, 320), 0.2, np.float32))
+        far = pipe.draw_overlay(frame, world_from_camera, np.full((240, 320), 0.6, np.float32))
+        none = pipe.draw_overlay(frame, world_from_camera, None)  # no depth this frame: drawn
+    finally:
+        pipe.close()
+    assert np.count_nonzero(far.max(axis=2) > 60) > 500
+    assert np.count_nonzero(near.max(axis=2) > 4) == 0  # (the line ends' faint rims blur to 2 levels of 255)
+    assert np.array_equal(none, far)

@@ -108,6 +108,10 @@ def visibility(model_z: np.ndarray, scene_z: np.ndarray, params: OcclusionParams
     k = params.noise_per_m2 if noise_per_m2 is None else noise_per_m2
     s = np.ascontiguousarray(scene_z, np.float32)
     m = np.ascontiguousarray(model_z, np.float32)
+    if params.feather_px > 0:
+        # pixels just outside the model (antialiased rims, gaps between thin lines) take the nearest model
+        # depth around them, so the feather blends hidden with hidden there, not with "nothing to hide"
+        m = np.minimum(m, cv2.erode(m, np.ones((5, 5), np.uint8), borderType=cv2.BORDER_REPLICATE))
     # OpenCV's element-wise operations (vectorised, no temporaries of Python floats): this runs per frame
     limit = cv2.add(cv2.multiply(s, s, scale=float(k)), s)
     limit = cv2.add(limit, float(tol))
