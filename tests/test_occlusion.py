@@ -116,7 +116,10 @@ def test_bad_occlusion_block_is_one_clear_line():
         parse_scene(data, "scene")
 
 
-def test_model_depth_from_the_renderer_matches_the_ray_cast_box(occlusion_recordings):
+# a CPU rasteriser's choice, a GPU's: a multisampled depth resolves to one sample off the pixel centre, and
+# the surface's polygon offset (lines win over it) pushes it back by about a pixel's depth slope
+@pytest.mark.parametrize("antialias, median_m, p95_m", [("ssaa", 0.5e-3, 3e-3), ("msaa", 1.5e-3, 4e-3)])
+def test_model_depth_from_the_renderer_matches_the_ray_cast_box(occlusion_recordings, antialias, median_m, p95_m):
     """The renderer's depth read-back (GL depth buffer -> metres, lens distortion applied) against the
     synthesiser's own ray casting of the same box (float geometry, no GL)."""
     from arapp.render import OverlayRenderer
@@ -127,7 +130,7 @@ def test_model_depth_from_the_renderer_matches_the_ray_cast_box(occlusion_record
     wfm, size, _ = read_truth(rec)
     box = trimesh.creation.box(tuple(size))
     cam = scene.camera
-    with OverlayRenderer(cam.K, cam.dist, cam.width, cam.height) as r:
+    with OverlayRenderer(cam.K, cam.dist, cam.width, cam.height, antialias=antialias) as r:
         for i in (0, 7):
             f = synth.render_full(i)
             occ = oc.Occluder("depth", depth=f.depth)
@@ -139,7 +142,8 @@ def test_model_depth_from_the_renderer_matches_the_ray_cast_box(occlusion_record
             # nearest-pixel silhouettes differ by a pixel at most: they agree on all but the rim
             assert np.count_nonzero(np.isfinite(z) != np.isfinite(truth)) < 0.12 * both.sum()
             err = np.abs(z[both] - truth[both])
-            assert np.median(err) < 0.5e-3 and np.percentile(err, 95) < 3e-3
+            assert np.median(err) < median_m and np.percentile(err, 95) < p95_m, (np.median(err),
+                                                                                  np.percentile(err, 95))
 
 
 @pytest.mark.parametrize("name, iou_min, edge_max", [("test_occlusion_hand", 0.88, 1.5),
