@@ -76,9 +76,9 @@ def run(quick: bool = False) -> str:
                   "depth; tests/test_occlusion.py checks it against the plane's geometry).", "",
                   "Ablations on the test recordings (depth mode; each row changes one parameter):", "",
                   "| variant | " + " | ".join(OCCLUSION_TEST) + " |", "|---|" + "---|" * len(OCCLUSION_TEST)]
-        variants = [("chosen (fill, median 3, feather 1 px)", {}), ("no hole filling", {"fill": False}),
-                    ("no median", {"median_px": 0}), ("occluder eroded 1 px", {"shrink_px": 1}),
-                    ("feather 2 px", {"feather_px": 2.0})]
+        variants = [("chosen (fill, median 3, occluder eroded 1 px, feather 1 px)", {}),
+                    ("no hole filling", {"fill": False}), ("no median", {"median_px": 0}),
+                    ("occluder not eroded", {"shrink_px": 0}), ("feather 2 px", {"feather_px": 2.0})]
         for label, kw in variants:
             p = dataclasses.replace(occlusion.DEFAULT_PARAMS, **kw)
             cells = []

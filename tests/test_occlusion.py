@@ -49,7 +49,8 @@ def test_model_behind_a_nearer_surface_is_never_drawn():
     p = oc.DEFAULT_PARAMS
     clearly_behind = model > scene + p.tolerance_m + p.noise_per_m2 * scene ** 2 + 0.002
     clearly_front = model < scene
-    k = np.ones((7, 7), np.uint8)  # 3 px from any pixel of the other kind: beyond the soft edge
+    r = 3 + p.shrink_px  # beyond the soft edge (3 sigma) and the occluder's erosion
+    k = np.ones((2 * r + 1, 2 * r + 1), np.uint8)
     inner_behind = cv2.erode(clearly_behind.astype(np.uint8), k).astype(bool)
     inner_front = cv2.erode(clearly_front.astype(np.uint8), k).astype(bool)
     assert inner_behind.any() and inner_front.any()

@@ -16,8 +16,9 @@ How a crop of the overlay is occluded (`visibility`):
 3. a model pixel is visible where its depth is at most the scene's plus a tolerance that grows with the
    distance as stereo noise does (`tolerance_m + noise_per_m2 * z^2`); unknown scene depth (0) and
    pixels without model depth (a contact shadow) leave the model visible;
-4. the hidden part may be eroded or grown by `shrink_px` (stereo depth edges bulge a pixel past the
-   object: foreground fattening; tuned to 0 on the tuning recordings) and the mask is feathered by a
+4. the model's depth is first carried a few px beyond its silhouette (so that neither the erosion nor the
+   feather treats the silhouette as an occlusion edge), the hidden part is eroded by `shrink_px` (stereo
+   depth edges bulge about a pixel past the object: foreground fattening) and the mask is feathered by a
    Gaussian of `feather_px`: a soft edge of about two pixels.
 
 The premultiplied crop is multiplied by that alpha (`apply_alpha`); `Occluder` packages it as the callable
@@ -45,7 +46,7 @@ class OcclusionParams:
     noise_per_m2: float = 0.004  # plus this times z^2 (metres): stereo depth noise grows with the square of z
     plane_tolerance_m: float = 0.001  # plane mode: the plane is exact, only the renderer's depth precision
     feather_px: float = 1.0  # Gaussian sigma of the soft edge, pixels
-    shrink_px: int = 0  # the occluder's mask eroded (> 0) or grown (< 0) by this much: tuned to 0
+    shrink_px: int = 1  # the occluder's mask eroded (> 0) or grown (< 0) by this much (foreground fattening)
     median_px: int = 3  # 0, 3 or 5: median filter of the scene depth (flying pixels, speckle)
     margin_px: int = 64  # scene depth read this far around the crop (hole filling along rows reaches out)
     fill: bool = True  # fill holes from the farther side (False: holes are unknown, the model drawn there)
@@ -108,10 +109,13 @@ def visibility(model_z: np.ndarray, scene_z: np.ndarray, params: OcclusionParams
     k = params.noise_per_m2 if noise_per_m2 is None else noise_per_m2
     s = np.ascontiguousarray(scene_z, np.float32)
     m = np.ascontiguousarray(model_z, np.float32)
-    if params.feather_px > 0:
+    reach = abs(int(params.shrink_px)) + int(np.ceil(3.0 * params.feather_px))
+    if reach > 0:
         # pixels just outside the model (antialiased rims, gaps between thin lines) take the nearest model
-        # depth around them, so the feather blends hidden with hidden there, not with "nothing to hide"
-        m = np.minimum(m, cv2.erode(m, np.ones((5, 5), np.uint8), borderType=cv2.BORDER_REPLICATE))
+        # depth around them, as far as the erosion and the feather reach, so that these never treat the
+        # model's own silhouette as the edge of an occluder; the model's own pixels keep their depth
+        near = cv2.erode(m, np.ones((2 * reach + 1, 2 * reach + 1), np.uint8), borderType=cv2.BORDER_REPLICATE)
+        m = np.where(np.isinf(m), near, m)
     # OpenCV's element-wise operations (vectorised, no temporaries of Python floats): this runs per frame
     limit = cv2.add(cv2.multiply(s, s, scale=float(k)), s)
     limit = cv2.add(limit, float(tol))
