@@ -147,8 +147,9 @@ def test_model_depth_from_the_renderer_matches_the_ray_cast_box(occlusion_record
                                                                                   np.percentile(err, 95))
 
 
-@pytest.mark.parametrize("name, iou_min, edge_max", [("test_occlusion_hand", 0.88, 1.5),
-                                                     ("test_occlusion_object", 0.88, 1.5)])
+# measured at 320x240: hand IoU 0.937, edge 0.66 px; object 0.967, 0.22 px
+@pytest.mark.parametrize("name, iou_min, edge_max", [("test_occlusion_hand", 0.92, 0.9),
+                                                     ("test_occlusion_object", 0.95, 0.5)])
 def test_depth_occlusion_matches_ground_truth(occlusion_recordings, name, iou_min, edge_max):
     from arapp.render.occlusion_score import score_recording
 
