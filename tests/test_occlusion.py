@@ -115,6 +115,10 @@ def test_bad_occlusion_block_is_one_clear_line():
     data["occlusion"]["depth"]["noise"] = 1
     with pytest.raises(SessionError, match=r"occlusion\.depth\.noise: unknown key"):
         parse_scene(data, "scene")
+    data = occlusion_scene("test_occlusion_hand")
+    data["effects"]["rolling_shutter"] = 0.02
+    with pytest.raises(SessionError, match="global shutter"):
+        parse_scene(data, "scene")
 
 
 # a CPU rasteriser's choice, a GPU's: a multisampled depth resolves to one sample off the pixel centre, and

@@ -27,7 +27,8 @@ Files written besides the recording's own (`synthesize`):
 - `occlusion/NNNNNN.png`: ground truth, 8-bit: 0 no model, 128 model hidden by the occluder, 255 model
   visible; a pixel's class is that of its centre's ray.
 - `occlusion.json`: the model box (`world_from_model`, `size`) and this legend.
-Frames are rendered at supersample 1 (the depth and masks are per pixel centre).
+The depth and masks are per output pixel centre (the colour follows the scene's supersampling). Global
+shutter and no motion blur only (the occluder is drawn at the frame's time).
 """
 
 from __future__ import annotations
@@ -70,6 +71,10 @@ def check_occlusion(block, where: str = "occlusion") -> dict:
                 raise SessionError(f"{where}.{name}.{k}: unknown key (known: {', '.join(defaults)})")
             merged[k] = v
         out[name] = merged
+    for key in ("start", "end", "fraction", "sweep", "radius", "height"):
+        v = out["occluder"][key]
+        if not isinstance(v, (int, float)) or isinstance(v, bool):
+            raise SessionError(f"{where}.occluder.{key}: must be a number, got {v!r}")
     if out["occluder"]["kind"] not in ("hand", "object"):
         raise SessionError(f"{where}.occluder.kind: must be 'hand' or 'object', got {out['occluder']['kind']!r}")
     size = out["model"]["size"]
@@ -103,7 +108,7 @@ class OcclusionRenderer:
         self.desk = DeskRenderer(scene)
         cam = scene.camera
         self.camera = cam
-        rays = _pixel_rays(cam) if scene.supersample == 1 else _pixel_rays(cam)
+        rays = _pixel_rays(cam)  # output pixels: the depth and the masks are per pixel centre
         self.rays = np.concatenate([rays, np.ones(rays.shape[:2] + (1,), np.float32)], axis=-1)  # (H, W, 3), z = 1
         m = self.spec["model"]
         c = self.desk.centre

@@ -215,6 +215,9 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
 
         if scene.held is not None:
             raise SessionError(f"{where}.occlusion: not with a held card (held); use a desk scene")
+        if (effects.get("rolling_shutter") or 0) > 0 or (effects.get("motion_blur") or 0) > 0:
+            raise SessionError(f"{where}.occlusion: needs a global shutter without motion blur "
+                               "(effects.rolling_shutter and effects.motion_blur 0)")
         check_occlusion(scene.occlusion, f"{where}.occlusion")
     if scene.held is not None:
         from tracking.synth.held import check_held
