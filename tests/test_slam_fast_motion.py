@@ -259,7 +259,7 @@ def test_no_fade_from_a_target_predicted_by_a_start_up_velocity():
     started from where that velocity put the output and showed 16 mm for several frames; no fade is begun
     until the velocity rests on two frame differences (MotionModel.steps). Measured after the first two
     tracked frames: at most 9 mm."""
-    from tracking.slam.tracking import MotionModel
+    from tracking.slam.frame_pose import MotionModel
 
     m = MotionModel()
     for k in range(3):

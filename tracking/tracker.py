@@ -68,7 +68,7 @@ from tracking.slam.fusion import PoseBlender, fuse_pose
 from tracking.slam.map import Map
 from tracking.slam.mapping import KeyframeRequest, LocalMapper
 from tracking.slam.relocalise import relocalise
-from tracking.slam.tracking import (MotionModel, match_by_projection, plausible, pnp_ransac, position_spread,
+from tracking.slam.frame_pose import (MotionModel, match_by_projection, plausible, pnp_ransac, position_spread,
                                     refine_pose)
 
 # checks in a row on which the background map disagrees with the anchors (`anchor_motion.disagrees`) before
