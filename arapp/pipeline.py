@@ -18,7 +18,7 @@ from arapp.placement import Placement, placement_from_any, world_from_model
 from tracking.camera import Camera
 from tracking.poses import invert
 from tracking.session import AnchorSpec
-from tracking.tracker import Tracker
+from tracking.fusion import Tracker
 
 MODES = ("shaded", "wireframe", "isolines", "translucent")
 STATE_COLOURS = {"marker": (80, 220, 80), "slam": (60, 200, 255), "lost": (60, 60, 255)}
