@@ -69,7 +69,7 @@ def _look(eye, target) -> np.ndarray:
 def test_a_board_whose_first_pose_is_likely_centimetres_off_does_not_start_it(markers, sigma, uncertain):
     """Four markers of a 4x3 board at the image edge, their corners smeared to ~1 px of noise (a fast pan's
     first sighting), fit that noise and read about a centimetre off at 0.5 m; sharp, or the whole board, they
-    read millimetres off. `Tracker._start_uncertain` must tell the two apart from the fit's own residual.
+    read millimetres off. `Handover.start_uncertain` must tell the two apart from the fit's own residual.
     Oracle: the camera position's RMS error over 200 noise draws, each pose by cv2.solvePnP (SQPnP, then
     Levenberg-Marquardt), against the 1.5 % of the distance the rule stands for (measured 10.9 mm against a
     7.7 mm limit; 1.7 mm sharp; 3.7 mm for the whole board)."""
