@@ -20,7 +20,7 @@ from arapp.render.occlusion import MODES as OCCLUSION_MODES
 from tracking.camera import Camera
 from tracking.poses import invert
 from tracking.session import AnchorSpec
-from tracking.tracker import Tracker
+from tracking.fusion import Tracker
 
 MODES = ("shaded", "wireframe", "isolines", "translucent")
 STATE_COLOURS = {"marker": (80, 220, 80), "slam": (60, 200, 255), "lost": (60, 60, 255)}

@@ -1,4 +1,4 @@
-"""SLAM tracking (tracking.tracker.Tracker) against the plain OpenCV per-frame marker pose (and that pose
+"""SLAM tracking (tracking.fusion.Tracker) against the plain OpenCV per-frame marker pose (and that pose
 through arapp's filter class), on the committed recordings with ground truth: tuning and test recordings
 in separate tables (recordings/README.md). Run: .venv/bin/python benchmarks/bench_slam.py [--quick]
 """
@@ -59,7 +59,7 @@ def measure(name: str, qr_call: str = "QRCodeDetector.detectAndDecodeMulti") -> 
     the filtered plain way on one recording."""
     from tracking.evaluation import evaluate
     from scenes import load_recording, run_tracker
-    from tracking.tracker import Tracker
+    from tracking.fusion import Tracker
 
     frames, session = load_recording(ROOT / "recordings" / name)
     gt_t = np.array([f[0] for f in frames])
@@ -89,7 +89,7 @@ def measure(name: str, qr_call: str = "QRCodeDetector.detectAndDecodeMulti") -> 
 def measure_paced(name: str, pace: str) -> dict:
     """The tracker on one recording with frames handed in at another pace (see run_tracker)."""
     from scenes import load_recording, run_tracker
-    from tracking.tracker import Tracker
+    from tracking.fusion import Tracker
 
     frames, session = load_recording(ROOT / "recordings" / name)
     with Tracker(session.camera, session.anchors) as tr:
@@ -108,7 +108,7 @@ def measure_held(name: str) -> dict:
     move in the room."""
     from peers import PlainPeer
     from scenes import held_recording, run_tracker
-    from tracking.tracker import Tracker
+    from tracking.fusion import Tracker
 
     frames, session = held_recording(name)
     peer = PlainPeer(session.anchors, session.camera)

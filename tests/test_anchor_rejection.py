@@ -14,7 +14,7 @@ from tracking.anchors.model import build_models
 from tracking.anchors.occlusion import covered_fraction, is_covered
 from tracking.session import parse_anchors
 from scenes import SKIN_BGR, marker_side, render_sequence, scene_dict
-from tracking.tracker import Tracker
+from tracking.fusion import Tracker
 
 MARKER = 0.06   # m, DICT_4X4_50 id 3 (scene_dict's marker)
 
@@ -201,7 +201,7 @@ def test_a_lookalike_anchor_does_not_teleport_the_model(lookalike_sequence):
             res = tr.process(img, t)
             errs.append(np.inf if res.world_from_camera is None else
                         np.linalg.norm(res.world_from_camera[:3, 3] - gt[:3, 3]))
-        trusted = set(getattr(tr._anchors, "trusted", ()))
+        trusted = set(getattr(tr.anchor_tracker, "trusted", ()))
     errs = np.array(errs)
     assert _seen(frames, 17) > 10 and _seen(frames[-10:], 3) == 0   # in view, at the end alone
     # before: the model jumped by centimetres once the look-alike was measured; now the world marker and

@@ -19,7 +19,7 @@ import pytest
 
 from scenes import held_recording, run_tracker
 from tracking.synth.presets import HELD, HELD_TEST, HELD_TUNING, PRESETS
-from tracking.tracker import Tracker
+from tracking.fusion import Tracker
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 

@@ -1,11 +1,11 @@
-"""How well a set of corners holds the camera position (tracking.slam.tracking.position_spread). Oracle: the
+"""How well a set of corners holds the camera position (tracking.slam.frame_pose.position_spread). Oracle: the
 spread of camera positions cv2.solvePnP gives over many draws of pixel noise."""
 
 import cv2
 import numpy as np
 
 from tracking.poses import invert
-from tracking.slam.tracking import position_spread
+from tracking.slam.frame_pose import position_spread
 from test_slam_flow import look
 
 K = np.array([[540.0, 0, 319.5], [0, 540.0, 239.5], [0, 0, 1]])

@@ -12,7 +12,7 @@ from tracking.slam.fusion import PoseBlender, fuse_pose
 from tracking.slam.map import Map
 from tracking.slam.mapping import triangulate_pair
 from tracking.slam.relocalise import relocalise
-from tracking.slam.tracking import MotionModel, match_by_projection, plausible, refine_pose
+from tracking.slam.frame_pose import MotionModel, match_by_projection, plausible, refine_pose
 from scipy.spatial.transform import Rotation
 
 K = np.array([[520.0, 0, 319.5], [0, 520.0, 239.5], [0, 0, 1]])

@@ -1,4 +1,4 @@
-"""The combined tracker under fast motion (tracking.tracker, tracking.slam.flow): the optical flow runs beside
+"""The combined tracker under fast motion (tracking.fusion, tracking.slam.flow): the optical flow runs beside
 the anchors' measurement, flow points are followed on across frames the anchors carry, plane seeds are placed
 again from a new pose, no keypoints are extracted before there is a map to start, and the output settles on
 a board's measurement soon after a map-only stretch. References: cv2.projectPoints, the recordings' ground
@@ -10,13 +10,14 @@ import cv2
 import numpy as np
 import pytest
 
-import tracking.tracker as tracker_module
+import tracking.fusion.flow_follow as flow_module
 from scenes import bundled_recording as recording, run_tracker
 from test_slam_flow import PLAIN, cv_project, look, texture, view  # noqa: F401  (texture: a fixture)
 from tracking.poses import make_pose
 from tracking.slam.features import FeatureExtractor
 from tracking.slam.flow import Tracks, relift, seed_on_plane
-from tracking.tracker import Tracker
+from tracking.fusion import Tracker
+from tracking.fusion.state import FrameState
 
 
 def test_relift_places_plane_seeds_from_a_new_pose_and_keeps_map_points(texture):  # noqa: F811
@@ -54,22 +55,22 @@ def _spy(monkeypatch, tr):
     points the flow followed (in) and kept (out)."""
     flow_started = threading.Event()
     log = {"anchors": [], "follow": []}
-    process, follow = tr._anchors.process, tracker_module.follow
+    process, follow = tr.anchor_tracker.process, flow_module.follow
 
     def anchors_process(*args, **kwargs):
         off_main = threading.current_thread() is not threading.main_thread()
         beside = off_main and flow_started.wait(0.3)   # the flow starts on the main thread meanwhile
-        log["anchors"].append((tr._frame, off_main, beside))
+        log["anchors"].append((tr.frame.index, off_main, beside))
         return process(*args, **kwargs)
 
     def spy_follow(camera, tracks, *args, **kwargs):
         flow_started.set()
         got = follow(camera, tracks, *args, **kwargs)
-        log["follow"].append((tr._frame, tracks.xy.copy(), None if got is None else got[1].xy.copy()))
+        log["follow"].append((tr.frame.index, tracks.xy.copy(), None if got is None else got[1].xy.copy()))
         return got
 
-    monkeypatch.setattr(tr._anchors, "process", anchors_process)
-    monkeypatch.setattr(tracker_module, "follow", spy_follow)
+    monkeypatch.setattr(tr.anchor_tracker, "process", anchors_process)
+    monkeypatch.setattr(flow_module, "follow", spy_follow)
     return flow_started, log
 
 
@@ -108,7 +109,7 @@ def test_no_keypoints_before_the_anchors_are_first_seen(monkeypatch):
     extract = FeatureExtractor.extract
 
     def spy(self, gray):
-        calls.append(tr._frame)
+        calls.append(tr.frame.index)
         return extract(self, gray)
 
     monkeypatch.setattr(FeatureExtractor, "extract", spy)
@@ -128,7 +129,7 @@ def test_output_settles_on_a_board_soon_after_a_map_only_stretch(name):
     from where it was over `precise_blend_frames` (5, starting on the return frame), not `blend_frames` (8):
     by the 4th frame after the return it is as close to the truth as the anchors alone (the tracker with
     slam=False). (Some of those frames may be the flow's again: a board leaving the view as the pan turns
-    back reads worse than the flow one frame after it, `_flow_holds_better`.)"""
+    back reads worse than the flow one frame after it, `Handover.flow_holds_better`.)"""
     frames, session = recording(name)
     with Tracker(session.camera, session.anchors, slam=False, filter=False) as tr:
         alone = run_tracker(tr, frames)["errors"]
@@ -186,13 +187,13 @@ def test_poses_do_not_depend_on_how_long_the_anchors_take(monkeypatch):
     runs = []
     for delay in (0.0, 0.015):
         with Tracker(session.camera, session.anchors, threaded=False) as tr:
-            process = tr._anchors.process
+            process = tr.anchor_tracker.process
 
             def slow(*args, delay=delay, **kwargs):
                 time.sleep(delay)
                 return process(*args, **kwargs)
 
-            monkeypatch.setattr(tr._anchors, "process", slow)
+            monkeypatch.setattr(tr.anchor_tracker, "process", slow)
             runs.append([tr.process(img, t).world_from_camera for t, img, _ in frames])
     assert sum(p is not None for p in runs[0]) >= 25
     for a, b in zip(*runs):
@@ -219,19 +220,19 @@ def test_a_smeared_board_is_shown_through_the_anchors_filter():
     weighs smeared measurements less, was 3 mm off."""
     from types import SimpleNamespace
 
-    from tracking.tracker import PRECISE_RMS_PX
+    from tracking.fusion.handover import PRECISE_RMS_PX, anchor_output
 
     raw, filtered = np.eye(4), np.eye(4)
     raw[0, 3], filtered[0, 3] = 0.03, 0.003
     board = SimpleNamespace(object_points=np.zeros((56, 3)), raw_world_from_camera=raw, world_from_camera=filtered,
                             covered=False, reprojection_error=0.2)
     assert PRECISE_RMS_PX <= 0.6
-    assert Tracker._anchor_output(board)[0, 3] == 0.03
+    assert anchor_output(board)[0, 3] == 0.03
     board.reprojection_error = 0.8
-    assert Tracker._anchor_output(board)[0, 3] == 0.003
+    assert anchor_output(board)[0, 3] == 0.003
     lone = SimpleNamespace(object_points=np.zeros((4, 3)), raw_world_from_camera=raw, world_from_camera=filtered,
                            covered=False, reprojection_error=0.05)
-    assert Tracker._anchor_output(lone)[0, 3] == 0.003
+    assert anchor_output(lone)[0, 3] == 0.003
 
 
 @pytest.mark.parametrize("name", ["tune_fast_pan", "tune_fast_pan_b", "tune_fast_pan_c", "tune_fast_pan_d"])
@@ -241,7 +242,7 @@ def test_flow_carries_a_rolling_shutter_pan_between_the_boards_visits(name):
     centimetres (median 14.7 / 8.1 mm, max 29 / 20 mm before); a board smeared by the pan whose corners fit
     it poorly was taken over the flow at its return. On _c three markers in a row at the image edge fitted
     well and read 22 mm off (max 33 mm), on _d one marker at the edge started the pose 51 mm off: a board
-    seen in part (`Tracker._partial_view`) neither starts the pose nor beats the flow when smeared.
+    seen in part (`Handover.partial_view`) neither starts the pose nor beats the flow when smeared.
     Measured now (a seam in a fast pan shown at once, the flow's velocity carried to the right time):
     median 2.8 / 1.5 / 2.2 / 1.8 mm, max 6.8 / 4.3 / 8.2 / 6.8 mm."""
     frames, session = recording(name)
@@ -259,7 +260,7 @@ def test_no_fade_from_a_target_predicted_by_a_start_up_velocity():
     started from where that velocity put the output and showed 16 mm for several frames; no fade is begun
     until the velocity rests on two frame differences (MotionModel.steps). Measured after the first two
     tracked frames: at most 9 mm."""
-    from tracking.slam.tracking import MotionModel
+    from tracking.slam.frame_pose import MotionModel
 
     m = MotionModel()
     for k in range(3):
@@ -292,13 +293,14 @@ def test_a_seam_is_faded_only_where_the_view_moves_slowly(turn, flow_px, faded):
             tr.motion.update(start @ make_pose(turned, np.zeros(3)), k / 30)
         t = 3 / 30
         pred = tr.motion.predict(t)
-        tr._last_out, tr._source, tr._lost, tr._frame = tr.motion.last.copy(), "anchors", 0, 7
+        tr.output.last, tr.output.source = tr.motion.last.copy(), "anchors"
+        frame = FrameState(7, t)
         if flow_px is not None:
             moved = np.tile([flow_px, 0.0], (50, 1))
-            tr._followed = (7, (pred, Tracks(np.zeros((480, 640), np.uint8), np.zeros((50, 2), np.float32),
-                                             np.zeros((50, 3)), moved)))
+            frame.flow_ran, frame.followed = True, (pred, Tracks(np.zeros((480, 640), np.uint8),
+                                                           np.zeros((50, 2), np.float32), np.zeros((50, 3)), moved))
         new = pred @ make_pose(np.eye(3), [0.003, 0.0, 0.0])
-        out = tr._output(new, pred, "map")
+        out = tr.output.show(new, pred, "map", frame, lost=0)
     shown = new if not faded else pred
     assert np.abs(out - shown).max() < 1e-9, (out[:3, 3], new[:3, 3], pred[:3, 3])
 
@@ -308,9 +310,9 @@ def test_a_board_coming_back_in_part_does_not_take_over_from_the_flow():
     shows two of its markers at the image edge, sharp. A pose on two markers there reads millimetres to
     centimetres off (5.3 mm measured here; 62 mm on an extra tuning pan, xt_fast_pan_j, whose lone
     returning marker took over); while the flow holds, such a partial view does not replace it
-    (`Tracker._partial_view`), and the board takes over once more of it is seen (at the end, where it
+    (`Handover.partial_view`), and the board takes over once more of it is seen (at the end, where it
     fits less well than a frame of flow after it is expected to hold, the flow may carry the last frames:
-    `_flow_holds_better`). Oracles: OpenCV's own
+    `Handover.flow_holds_better`). Oracles: OpenCV's own
     detector for how many markers are in view, the render's ground truth for the error (0.6 mm measured on
     the two-marker frame)."""
     from scenes import board_scene_dict, render_sequence
@@ -337,7 +339,7 @@ def test_a_board_coming_back_in_part_does_not_take_over_from_the_flow():
 
 
 def test_a_hand_over_to_the_better_flow_fades_from_the_anchors_pose():
-    """When the flow takes a frame from a board it holds better (`_flow_holds_better`), the seam fades from
+    """When the flow takes a frame from a board it holds better (`Handover.flow_holds_better`), the seam fades from
     the anchors' own pose this frame, not from where the motion model would have put the output (a pan
     speeding up outruns that), and as onto precise anchors: over `precise_blend_frames`, this frame taking
     the first step. Rule written here: on a slowly turning camera, the output is the flow's pose moved
@@ -351,9 +353,9 @@ def test_a_hand_over_to_the_better_flow_fades_from_the_anchors_pose():
             turned = cv2.Rodrigues(np.array([0.0, 0.05 * k / 30, 0.0]))[0]
             tr.motion.update(start @ make_pose(turned, np.zeros(3)), k / 30)
         pred = tr.motion.predict(3 / 30)
-        tr._last_out, tr._source, tr._lost, tr._frame = tr.motion.last.copy(), "anchors", 0, 7
+        tr.output.last, tr.output.source = tr.motion.last.copy(), "anchors"
         flow = pred @ make_pose(np.eye(3), [0.003, 0.0, 0.0])
         board = pred @ make_pose(np.eye(3), [-0.002, 0.0, 0.0])
-        out = tr._output(flow, pred, "fused", precise=True, seam_from=board)
-        a = 1.0 - 1.0 / tr.precise_blend_frames
+        out = tr.output.show(flow, pred, "fused", FrameState(7, 3 / 30), lost=0, precise=True, seam_from=board)
+        a = 1.0 - 1.0 / tr.config.precise_blend_frames
     assert np.allclose(out[:3, 3], flow[:3, 3] + a * (board[:3, 3] - flow[:3, 3]), atol=1e-9), out[:3, 3]

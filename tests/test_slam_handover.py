@@ -3,7 +3,7 @@
 One frame after a sharp board, the flow's pose is within a millimetre of the anchors' last one, while the
 board's last few markers, smeared at the image edge, fit their corners to a pixel and read a centimetre
 off. The flow's points would be placed on the plane again from whichever pose the frame takes, and carry
-its error through the whole pan. `Tracker._flow_holds_better` takes the flow when the anchors' expected
+its error through the whole pan. `Handover.flow_holds_better` takes the flow when the anchors' expected
 position error is the larger: their position spread at the fit's own residual, against the spread of the
 anchors' last pose plus `FLOW_DRIFT_M` a frame.
 
@@ -20,7 +20,9 @@ import pytest
 from test_slam_start import _look
 from tracking.camera import Camera
 from tracking.session import parse_anchors
-from tracking.tracker import FLOW_DRIFT_M, Tracker
+from tracking.fusion import Tracker
+from tracking.fusion.handover import FLOW_DRIFT_M
+from tracking.fusion.state import AnchorMemory
 
 K = np.array([[530.0, 0, 319.5], [0, 530.0, 239.5], [0, 0, 1]])
 BOARD = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
@@ -48,7 +50,7 @@ def _draws(world, pose, sigma, rng, n=200):
 def test_the_flow_carries_a_frame_when_the_board_reads_worse(markers, sigma, flow):
     rng = np.random.default_rng(3)
     with Tracker(Camera(K, np.zeros(5), 640, 480), parse_anchors(BOARD), threaded=False) as tr:
-        model = tr._anchors.models[0]
+        model = tr.anchor_tracker.models[0]
         corners = {i: model.to_world(model.markers[i]) for i in ALL}
         centre = np.concatenate(list(corners.values())).mean(axis=0)
         pose = _look(centre + [0.25, -0.25, 0.35], centre + [0.12, 0.02, 0.0])
@@ -64,9 +66,8 @@ def test_the_flow_carries_a_frame_when_the_board_reads_worse(markers, sigma, flo
         now_world = np.concatenate([corners[i] for i in markers])
         said, errors = [], []
         for k, draw in enumerate(_draws(now_world, pose, sigma, rng)):
-            tr._anchor_spread_last = tr._anchor_spread(result(whole, last[k]))
-            tr._since_anchor, tr._anchor_t = 0, 0.0
-            said.append(tr._flow_holds_better(result(now_world, draw), got=object(), t=1 / 30))
+            memory = AnchorMemory(t=0.0, spread=tr.handover.anchor_spread(result(whole, last[k])), since=0)
+            said.append(tr.handover.flow_holds_better(result(now_world, draw), object(), 1 / 30, memory))
             errors.append(np.sum((draw[0][:3, 3] - pose[:3, 3]) ** 2))
     now_error = np.sqrt(np.mean(errors))
     assert (now_error > last_error + FLOW_DRIFT_M) == flow, (now_error, last_error)
@@ -77,9 +78,9 @@ def test_no_hand_over_without_a_flow_or_a_board():
     with Tracker(Camera(K, np.zeros(5), 640, 480), parse_anchors(BOARD), threaded=False) as tr:
         ar = SimpleNamespace(raw_world_from_camera=np.eye(4), anchors_seen=[0], object_points=np.zeros((16, 3)),
                              reprojection_error=5.0)
-        tr._anchor_spread_last, tr._anchor_t = 0.0, 0.0
-        assert tr._flow_holds_better(ar, got=object(), t=1 / 30)      # (the case itself: the flow holds better)
-        assert not tr._flow_holds_better(ar, got=None, t=1 / 30)
-        assert not tr._flow_holds_better(ar, got=object(), t=tr.smear_hold_s + 0.1)   # too long ago
-        tr._anchor_spread_last = None          # the last pose was not a board's
-        assert not tr._flow_holds_better(ar, got=object(), t=1 / 30)
+        holds_better, memory = tr.handover.flow_holds_better, AnchorMemory(t=0.0, spread=0.0)
+        assert holds_better(ar, object(), 1 / 30, memory)      # (the case itself: the flow holds better)
+        assert not holds_better(ar, None, 1 / 30, memory)
+        assert not holds_better(ar, object(), tr.config.smear_hold_s + 0.1, memory)   # too long ago
+        memory.spread = None          # the last pose was not a board's
+        assert not holds_better(ar, object(), 1 / 30, memory)

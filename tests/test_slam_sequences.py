@@ -9,7 +9,7 @@ import pytest
 from tracking.anchors import plain_opencv_pose
 from tracking.evaluation import evaluate
 from scenes import away_and_back_keys, bundled_recording as recording, render_sequence, run_tracker, scene_dict
-from tracking.tracker import Tracker, TrackResult
+from tracking.fusion import Tracker, TrackResult
 
 
 def plain_metrics(frames, session):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from scenes import board_scene_dict, render_sequence
-from tracking.tracker import Tracker
+from tracking.fusion import Tracker
 
 SMEARED = 4   # frames
 
@@ -69,7 +69,7 @@ def _look(eye, target) -> np.ndarray:
 def test_a_board_whose_first_pose_is_likely_centimetres_off_does_not_start_it(markers, sigma, uncertain):
     """Four markers of a 4x3 board at the image edge, their corners smeared to ~1 px of noise (a fast pan's
     first sighting), fit that noise and read about a centimetre off at 0.5 m; sharp, or the whole board, they
-    read millimetres off. `Tracker._start_uncertain` must tell the two apart from the fit's own residual.
+    read millimetres off. `Handover.start_uncertain` must tell the two apart from the fit's own residual.
     Oracle: the camera position's RMS error over 200 noise draws, each pose by cv2.solvePnP (SQPnP, then
     Levenberg-Marquardt), against the 1.5 % of the distance the rule stands for (measured 10.9 mm against a
     7.7 mm limit; 1.7 mm sharp; 3.7 mm for the whole board)."""
@@ -77,7 +77,7 @@ def test_a_board_whose_first_pose_is_likely_centimetres_off_does_not_start_it(ma
 
     from tracking.camera import Camera
     from tracking.session import parse_anchors
-    from tracking.tracker import START_SPREAD
+    from tracking.fusion.handover import START_SPREAD
 
     K = np.array([[530.0, 0, 319.5], [0, 530.0, 239.5], [0, 0, 1]])
     board = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
@@ -85,7 +85,7 @@ def test_a_board_whose_first_pose_is_likely_centimetres_off_does_not_start_it(ma
     cam = Camera(K, np.zeros(5), 640, 480)
     rng = np.random.default_rng(1)
     with Tracker(cam, parse_anchors(board), threaded=False) as tr:
-        model = tr._anchors.models[0]
+        model = tr.anchor_tracker.models[0]
         world = np.concatenate([model.to_world(model.markers[i]) for i in markers])
         centre = np.concatenate([model.to_world(c) for c in model.markers.values()]).mean(axis=0)
         pose = _look(centre + [0.25, -0.25, 0.35], centre + [0.12, 0.02, 0.0])
@@ -100,7 +100,7 @@ def test_a_board_whose_first_pose_is_likely_centimetres_off_does_not_start_it(ma
             fitted = np.linalg.inv(cam_from_world)
             rms = float(np.sqrt(np.mean((cv2.projectPoints(world, rv, tv, K, None)[0].reshape(-1, 2) - seen) ** 2)))
             errors.append(np.linalg.norm(fitted[:3, 3] - pose[:3, 3]))
-            said.append(tr._start_uncertain(SimpleNamespace(raw_world_from_camera=fitted, anchors_seen=[0],
+            said.append(tr.handover.start_uncertain(SimpleNamespace(raw_world_from_camera=fitted, anchors_seen=[0],
                                                             object_points=world, reprojection_error=rms)))
     limit = START_SPREAD * np.linalg.norm(pose[:3, 3] - world.mean(axis=0))
     rms_error = np.sqrt(np.mean(np.square(errors)))

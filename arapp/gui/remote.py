@@ -43,7 +43,7 @@ from arapp.pipeline import FrameResult
 from tracking.camera import Camera
 from tracking.session import parse_anchors
 
-PRELOAD = ["numpy", "cv2", "arapp.pipeline", "arapp.app.live", "tracking.sources", "tracking.tracker",
+PRELOAD = ["numpy", "cv2", "arapp.pipeline", "arapp.app.live", "tracking.sources", "tracking.fusion",
            "arapp.geometry.model", "trimesh"]
 # the model state each frame carries back (LiveEngine.state)
 STATE_KEYS = ("mesh_faces", "model_gen", "mode", "resets", "toolpaths", "discovery")

@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from tracking.sources import SourceWarning
-from tracking.tracker import Tracker
+from tracking.fusion import Tracker
 
 
 class ScanCancelled(Exception):

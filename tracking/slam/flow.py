@@ -43,7 +43,7 @@ import cv2
 import numpy as np
 
 from tracking.camera import Camera
-from tracking.slam.tracking import pnp_ransac, refine_pose
+from tracking.slam.frame_pose import pnp_ransac, refine_pose
 
 WINDOW = (19, 19)       # pixels: big enough to hold a smeared corner (21 cost a fifth more, same accuracy)
 LEVELS = 3              # pyramid levels above the image: with a predicted start, 30+ px/frame is fine

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from tracking.poses import invert, make_pose
-from tracking.slam.tracking import refine_pose
+from tracking.slam.frame_pose import refine_pose
 
 
 def fuse_pose(K: np.ndarray, init: np.ndarray, corner_world: np.ndarray, corner_uv: np.ndarray,

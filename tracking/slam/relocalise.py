@@ -11,7 +11,7 @@ import numpy as np
 
 from tracking.slam.features import Features
 from tracking.slam.map import Map
-from tracking.slam.tracking import pnp_ransac, refine_pose
+from tracking.slam.frame_pose import pnp_ransac, refine_pose
 
 
 def relocalise(m: Map, feats: Features, K: np.ndarray, near: np.ndarray | None = None, max_keyframes: int = 8,

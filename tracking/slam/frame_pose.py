@@ -1,4 +1,4 @@
-"""Per-frame tracking against the map: motion prediction, projection matching, PnP RANSAC,
+"""A frame's pose against the map: motion prediction, projection matching, PnP RANSAC,
 robust (Huber) pose-only refinement.
 
 Poses: `world_from_camera` 4x4 (OpenCV camera axes); internally the optimiser

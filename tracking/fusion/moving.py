@@ -1,0 +1,100 @@
+"""Anchors that move in the room (a card held up to a webcam): on keypoint frames the background (ORB
+features off the anchors between two checked frames, and the map's points off them) is tested against the
+anchors' poses (`tracking.slam.anchor_motion`); once it disagrees, `MovingAnchors.moving` turns on for the
+rest of the session and the tracker drops its map."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tracking.camera import Camera
+from tracking.fusion.handover import Handover, fits_well
+from tracking.poses import rotation_angle
+from tracking.slam.anchor_motion import MIN_BACKGROUND, background_rigid, disagrees, on_anchor, outline_region
+from tracking.slam.frame_pose import position_spread
+
+# checks in a row on which the background map disagrees with the anchors (`anchor_motion.disagrees`) before
+# the anchors count as moving in the room: one check can meet a flipped lone marker or a map point mismatch
+MOVED_CHECKS = 2
+# pixels: the noise taken for a lone marker's or QR code's corners in its expected error (their residual
+# says nothing: four corners fit a pose to hundredths of a pixel whatever its error)
+MARKER_SIGMA_PX = 0.5
+# the background's two-view test (`anchor_motion.background_rigid`): the share of background matches no indoor
+# depth explains above which a check counts against the anchors (a few mismatches, a hand, are below it);
+# under a fifth, with the anchors' pose turned by MOVED_TURN_DEG or moved MOVED_SHIFT_M since, counts for them
+MOVED_MISS = 0.5
+MOVED_TURN_DEG = 1.5
+MOVED_SHIFT_M = 0.03
+MOVED_SURE = 0.9   # ... and above which, on 3 * MIN_BACKGROUND matches or more, one check is enough
+MOVED_REF_FRAMES = 45   # frames after which the test's earlier frame is too old to compare with
+
+
+class MovingAnchors:
+    """Whether the anchors move in the room (`moving`), from checks of the background against them.
+    `track_map(init, X, D, feats)`: the tracker's map-only fit (`PoseFits.track_map`)."""
+
+    def __init__(self, camera: Camera, handover: Handover, track_map, min_inliers: int):
+        self.camera = camera
+        self.handover = handover
+        self.track_map = track_map
+        self.min_inliers = min_inliers
+        self.moving = False   # the anchors were seen to move in the room: map off, flow on them
+        self.votes = 0        # background-map checks in a row that disagreed with the anchors
+        self.strong = False   # the last check that disagreed did so beyond doubt (MOVED_SURE)
+        self.ref: tuple | None = None   # (frame, Features, anchors' pose, their outline px) to compare with
+
+    def check(self, ar, anchor_pose, corners_w, feats, X, D, frame: int, steady: bool) -> bool:
+        """Compare the anchors' pose this frame with the pose the map's points off the anchors give, fitted
+        from it; when they disagree beyond both fits' expected errors (`anchor_motion.disagrees`) on
+        `MOVED_CHECKS` checks in a row, the anchors move in the room. `steady`: tracked on the last frame with
+        a velocity of 3+ steps (the background's two-view test needs it). True when the anchors turned out
+        to move on this very check (the caller drops the map, which holds the room)."""
+        if self.moving or len(feats) < self.min_inliers or ar.covered:
+            return False
+        # only a board that fits well holds its turn to a few hundredths of a degree; a lone marker's pose turns
+        # by a degree with its noise (5-9 px at the image edge: a still desk then reads as moving)
+        verdict = (self._background_verdict(anchor_pose, feats, frame)
+                   if steady and self.handover.board_fit(ar) is not None and fits_well(ar) else None)
+        off = ~on_anchor(X, self.handover.anchors.outlines)
+        if verdict is None and off.sum() >= self.min_inliers:
+            p, pi, _, inl = self.track_map(anchor_pose, X[off], D[off], feats)
+            if p is not None:
+                map_spread = position_spread(self.camera.K, p, X[off][pi[inl]], 1.0)
+                spread = self.handover.anchor_spread(ar)
+                if spread is None:
+                    spread = position_spread(self.camera.K, anchor_pose, corners_w, MARKER_SIGMA_PX)
+                verdict = disagrees(anchor_pose, p, spread, map_spread)
+        if verdict is None:
+            return False   # the background is not matched here: no verdict either way
+        if not verdict:
+            self.votes = 0
+            return False
+        self.votes += 1
+        if self.votes >= MOVED_CHECKS or self.strong:
+            self.moving = True
+        return self.moving
+
+    def _background_verdict(self, anchor_pose, feats, frame: int) -> bool | None:
+        """The background's two-view test (`anchor_motion.background_rigid`) between this frame and an earlier
+        checked one: True when most background matches move as no point rigid with the anchors could, False
+        when nearly all do while the anchors' pose changed enough to tell, None when it cannot say yet (the
+        earlier frame is then kept, so the motion adds up)."""
+        region = outline_region(self.camera, anchor_pose, self.handover.anchors.outlines)
+        now = (frame, feats, anchor_pose, region)
+        ref = self.ref
+        if ref is None or frame - ref[0] > MOVED_REF_FRAMES:
+            self.ref = now
+            return None
+        turned = np.degrees(rotation_angle(ref[2][:3, :3].T @ anchor_pose[:3, :3]))
+        shifted = float(np.linalg.norm(ref[2][:3, 3] - anchor_pose[:3, 3]))
+        if not (turned > MOVED_TURN_DEG or shifted > MOVED_SHIFT_M):
+            return None   # too little motion to tell from the anchors' own noise: the motion adds up
+        n, miss = background_rigid(self.camera.K, ref[1:], now[1:])
+        if n < MIN_BACKGROUND:
+            return None
+        self.ref = now
+        if miss > MOVED_MISS:
+            # nearly the whole background against the anchors, on many matches: no mismatch or hand does that
+            self.strong = miss > MOVED_SURE and n >= 3 * MIN_BACKGROUND
+            return True
+        return False if miss < 0.2 else None
