@@ -29,6 +29,9 @@ from tracking.camera import Camera
 from tracking.errors import CalibrationError
 
 _MESH_CACHE_SIZE = 16
+#: framebuffers are sized to the crop, rounded up to this many output pixels per axis, so that a model
+#: moving a little does not reallocate them every frame
+_FBO_STEP = 32
 _LINESET_CACHE_SIZE = 64
 
 
@@ -103,7 +106,10 @@ class OverlayRenderer:
         self.cull = True  # back-face culling of closed meshes (switchable for comparisons)
         self._fbo = self._resolve = None
         self._fbo_size = (0, 0)
-        self._alloc_framebuffers(self._und_limits[2], self._und_limits[3])  # crop size in output pixels
+        # sized to the crop on each draw (see _fit_framebuffers): a framebuffer much larger than what is
+        # drawn costs a CPU rasteriser per frame (clearing, binning) even outside the scissor box
+        self._alloc_framebuffers(min(self.width, 8 * _FBO_STEP), min(self.height, 8 * _FBO_STEP))
+        self._readback = None  # reused read-back buffer of the supersampled crop
         self._memo = None  # (key, last crop): see _render_crop
         self._lines_cache: OrderedDict[tuple, tuple] = OrderedDict()  # see _collect_lines
         self._meshes: OrderedDict[int, GpuMesh] = OrderedDict()
@@ -244,6 +250,17 @@ class OverlayRenderer:
         self._fbo = fbo(self.samples)
         self._resolve = fbo(0) if self.samples > 0 else None
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+
+    def _fit_framebuffers(self, w: int, h: int) -> tuple[int, int]:
+        """Make the framebuffers hold a w x h crop (output pixels) without being much larger; returns
+        the crop size they hold (smaller only beyond the GL renderbuffer limit)."""
+        fw, fh = self._fbo_size
+        want = (-(-w // _FBO_STEP) * _FBO_STEP, -(-h // _FBO_STEP) * _FBO_STEP)
+        # grow when too small; shrink only when more than twice the area needed (hysteresis)
+        if w > fw or h > fh or fw * fh > 2 * want[0] * want[1]:
+            self._alloc_framebuffers(*want)
+            fw, fh = self._fbo_size
+        return min(w, fw), min(h, fh)
 
     def _free_framebuffers(self) -> None:
         GL = self.GL
@@ -439,11 +456,8 @@ class OverlayRenderer:
                 return None
         else:
             out_crop = crop
-        w, h = crop[2], crop[3]
-        if w > self._fbo_size[0] or h > self._fbo_size[1]:
-            self._alloc_framebuffers(max(w, self._fbo_size[0]), max(h, self._fbo_size[1]))
-            w, h = min(w, self._fbo_size[0]), min(h, self._fbo_size[1])
-            crop = (crop[0], crop[1], w, h)
+        w, h = self._fit_framebuffers(crop[2], crop[3])
+        crop = (crop[0], crop[1], w, h)
 
         # 3. draw
         P = projection.gl_projection(self.K, crop, near, far)
@@ -501,7 +515,14 @@ class OverlayRenderer:
             GL.glBlitFramebuffer(0, 0, sw, sh, 0, 0, sw, sh, GL.GL_COLOR_BUFFER_BIT, GL.GL_NEAREST)
             GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._resolve[0])
         GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)
-        buf = np.empty((sh, sw, 4), np.uint8)
+        if (sw, sh) != (w, h):
+            # read into a reused buffer; the downsample below makes the crop that is kept
+            rb = self._readback
+            if rb is None or rb.size < sw * sh * 4:
+                rb = self._readback = np.empty(sw * sh * 4, np.uint8)
+            buf = rb[:sw * sh * 4].reshape(sh, sw, 4)
+        else:
+            buf = np.empty((sh, sw, 4), np.uint8)  # returned (and memoised) as it is
         GL.glReadPixels(0, 0, sw, sh, GL.GL_RGBA, GL.GL_UNSIGNED_BYTE, buf)
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
         if (sw, sh) != (w, h):
@@ -535,7 +556,11 @@ class OverlayRenderer:
             GL.glCullFace(GL.GL_BACK)
         if alpha >= 1.0:
             GL.glDepthFunc(GL.GL_LESS)
+            # opaque: "over" with alpha 1 writes the source unchanged, so blending (reading the colour
+            # buffer back per fragment) is switched off, the same pixels for less rasteriser work
+            GL.glDisable(GL.GL_BLEND)
             g.surface.draw(GL.GL_TRIANGLES)
+            GL.glEnable(GL.GL_BLEND)
         else:
             # depth pre-pass, then colour of the nearest layer only: order-independent translucency
             GL.glDepthFunc(GL.GL_LESS)
