@@ -229,6 +229,7 @@ class OverlayRenderer:
         self._free_framebuffers()
         max_rb = int(int(GL.glGetIntegerv(GL.GL_MAX_RENDERBUFFER_SIZE)) / self.ss)
         w, h = min(w, max_rb), min(h, max_rb)
+        self._fbo_max = max_rb
         self._fbo_size = (w, h)  # in output pixels; the buffers hold ss times that
         w, h = int(np.ceil(w * self.ss)), int(np.ceil(h * self.ss))
 
@@ -253,12 +254,24 @@ class OverlayRenderer:
 
     def _fit_framebuffers(self, w: int, h: int) -> tuple[int, int]:
         """Make the framebuffers hold a w x h crop (output pixels) without being much larger; returns
-        the crop size they hold (smaller only beyond the GL renderbuffer limit)."""
+        the crop size they hold (smaller only beyond the GL renderbuffer limit).
+
+        Reallocating costs about as much as a frame, and an oversized framebuffer little (some binning
+        and clearing outside the scissor box on a CPU rasteriser, nothing on a GPU): so grow with room
+        to spare, and shrink only when the framebuffers are many times larger than the crop.
+        """
         fw, fh = self._fbo_size
-        want = (-(-w // _FBO_STEP) * _FBO_STEP, -(-h // _FBO_STEP) * _FBO_STEP)
-        # grow when too small; shrink only when more than twice the area needed (hysteresis)
-        if w > fw or h > fh or fw * fh > 2 * want[0] * want[1]:
-            self._alloc_framebuffers(*want)
+        mx = self._fbo_max  # beyond the GL limit the crop is cut, not the framebuffer grown
+        too_small = (w > fw and fw < mx) or (h > fh and fh < mx)
+        if too_small or fw * fh > 6 * w * h:
+            if not too_small:
+                fw = fh = 0  # shrinking: size to this crop alone
+
+            def size(n, limit):  # 1.5x the need, but not beyond the largest possible crop
+                n = min(n + n // 2, max(limit, n))
+                return -(-n // _FBO_STEP) * _FBO_STEP
+
+            self._alloc_framebuffers(size(max(w, fw), self._und_limits[2]), size(max(h, fh), self._und_limits[3]))
             fw, fh = self._fbo_size
         return min(w, fw), min(h, fh)
 
