@@ -110,6 +110,7 @@ class OverlayRenderer:
         # drawn costs a CPU rasteriser per frame (clearing, binning) even outside the scissor box
         self._alloc_framebuffers(min(self.width, 8 * _FBO_STEP), min(self.height, 8 * _FBO_STEP))
         self._readback = None  # reused read-back buffer of the supersampled crop
+        self._last_gl = None  # where the last crop lies in the framebuffer (see _render_crop_gl)
         self._memo = None  # (key, last crop): see _render_crop
         self._lines_cache: OrderedDict[tuple, tuple] = OrderedDict()  # see _collect_lines
         self._meshes: OrderedDict[int, GpuMesh] = OrderedDict()
@@ -412,6 +413,7 @@ class OverlayRenderer:
 
     def _render_crop_gl(self, mesh, T, mode, line_list, color, rgba, shadow):
         self._make_current()
+        self._last_gl = None
         GL = self.GL
 
         gmesh = self._gpu_mesh(mesh) if mesh is not None else None
@@ -538,6 +540,10 @@ class OverlayRenderer:
             buf = np.empty((sh, sw, 4), np.uint8)  # returned (and memoised) as it is
         GL.glReadPixels(0, 0, sw, sh, GL.GL_RGBA, GL.GL_UNSIGNED_BYTE, buf)
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+        # the model's depth stays in the framebuffer (not read back: the colour alone makes the overlay)
+        # until the next draw; this says where it lies, for a depth read-back on demand (occlusion):
+        # the undistorted crop (x0, y0, w, h) in output pixels, its size (sw, sh) in the buffer, near, far
+        self._last_gl = (crop, (sw, sh), near, far)
         if (sw, sh) != (w, h):
             # exact area-weighted downsample (premultiplied, so colours average correctly)
             buf = cv2.resize(buf, (w, h), interpolation=cv2.INTER_AREA)
