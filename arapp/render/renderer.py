@@ -259,12 +259,12 @@ class OverlayRenderer:
 
         Reallocating costs about as much as a frame, and an oversized framebuffer little (some binning
         and clearing outside the scissor box on a CPU rasteriser, nothing on a GPU): so grow with room
-        to spare, and shrink only when the framebuffers are many times larger than the crop.
+        to spare, and shrink only when the framebuffers are several times larger than the crop.
         """
         fw, fh = self._fbo_size
         mx = self._fbo_max  # beyond the GL limit the crop is cut, not the framebuffer grown
         too_small = (w > fw and fw < mx) or (h > fh and fh < mx)
-        if too_small or fw * fh > 6 * w * h:
+        if too_small or fw * fh > 4 * w * h:
             if not too_small:
                 fw = fh = 0  # shrinking: size to this crop alone
 
@@ -482,14 +482,16 @@ class OverlayRenderer:
         sw, sh = int(round(w * ss)), int(round(h * ss))
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self._fbo[0])
         GL.glViewport(0, 0, sw, sh)
-        # clear (and draw) only the crop: clearing the whole multisampled buffer costs more than drawing
-        GL.glScissor(0, 0, sw, sh)
-        GL.glEnable(GL.GL_SCISSOR_TEST)
+        # the framebuffers are sized to the crop (_fit_framebuffers), so the whole of them is cleared: a
+        # scissored clear is drawn as a quad through the fragment pipeline, a full one is a plain fill
+        GL.glDisable(GL.GL_SCISSOR_TEST)
         GL.glClearColor(0.0, 0.0, 0.0, 0.0)
         GL.glClearDepth(1.0)
         GL.glDepthMask(GL.GL_TRUE)
         GL.glColorMask(GL.GL_TRUE, GL.GL_TRUE, GL.GL_TRUE, GL.GL_TRUE)
         GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
+        GL.glScissor(0, 0, sw, sh)  # draw only into the crop
+        GL.glEnable(GL.GL_SCISSOR_TEST)
         GL.glEnable(GL.GL_DEPTH_TEST)
         GL.glDisable(GL.GL_CULL_FACE)
         GL.glEnable(GL.GL_BLEND)
