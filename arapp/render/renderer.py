@@ -96,8 +96,9 @@ class OverlayRenderer:
         self._shadow_prog = programs.build_program(programs.SHADOW_VS, programs.SHADOW_FS)
         self.gl_renderer = GL.glGetString(GL.GL_RENDERER).decode(errors="replace")
         antialias = self._antialias_request
+        software = any(k in self.gl_renderer.lower() for k in ("llvmpipe", "softpipe", "swrast", "software"))
+        self._software = software
         if antialias == "auto":
-            software = any(k in self.gl_renderer.lower() for k in ("llvmpipe", "softpipe", "swrast", "software"))
             antialias = "ssaa" if software else "msaa"
         self.antialias = antialias
         max_samples = int(GL.glGetIntegerv(GL.GL_MAX_SAMPLES))
@@ -260,17 +261,19 @@ class OverlayRenderer:
         Each frame clears the whole framebuffers (see _render_crop_gl), which on a CPU rasteriser costs
         in proportion to their area, and reallocating them costs little (measured on llvmpipe with the
         bench's 720p torus: a framebuffer fitted to every crop anew beat one with 1.5x room per axis).
-        So they grow to 5 % beyond the crop and shrink once they hold 1.5 times its area.
+        So there they grow to 5 % beyond the crop and shrink once they hold 1.5 times its area. On a GPU
+        clearing is nearly free and a reallocation may stall the driver: 1.5x room, shrink at 4x the area.
         """
+        room, shrink = (1.05, 1.5) if self._software else (1.5, 4.0)
         fw, fh = self._fbo_size
         mx = self._fbo_max  # beyond the GL limit the crop is cut, not the framebuffer grown
         too_small = (w > fw and fw < mx) or (h > fh and fh < mx)
-        if too_small or fw * fh > 1.5 * w * h:
+        if too_small or fw * fh > shrink * w * h:
             if not too_small:
                 fw = fh = 0  # shrinking: size to this crop alone
 
-            def size(n, limit):  # 5 % room, but not beyond the largest possible crop
-                n = min(n + n // 20, max(limit, n))
+            def size(n, limit):  # with room, but not beyond the largest possible crop
+                n = min(int(n * room), max(limit, n))
                 return -(-n // _FBO_STEP) * _FBO_STEP
 
             self._alloc_framebuffers(size(max(w, fw), self._und_limits[2]), size(max(h, fh), self._und_limits[3]))
