@@ -15,6 +15,8 @@ import numpy as np
 
 from arapp.geometry import load_model
 from arapp.placement import Placement, placement_from_any, world_from_model
+from arapp.render import occlusion
+from arapp.render.occlusion import MODES as OCCLUSION_MODES
 from tracking.camera import Camera
 from tracking.poses import invert
 from tracking.session import AnchorSpec
@@ -60,6 +62,7 @@ class Pipeline:
         draw: bool = True,
         status_line: bool = True,
         tracker_params: dict | None = None,
+        occlusion: str | None = None,
     ):
         self.camera = camera
         self.anchors = anchors
@@ -76,6 +79,9 @@ class Pipeline:
         self.color = None
         self.world_from_model = np.eye(4)
         self.toolpaths = None  # (line_sets, world_from_bed) set by set_toolpaths
+        self.occlusion: str | None = None  # "off", "depth", "plane"; None: depth when a frame has depth
+        self._plane = None  # arapp.render.occlusion.PlaneDepth, made on first use
+        self.set_occlusion(occlusion)
         if model is not None:
             self.set_model(model, placement)
 
@@ -114,6 +120,27 @@ class Pipeline:
             raise ValueError(f"display mode must be one of {', '.join(MODES)}, got {mode!r}")
         self.mode = mode
 
+    def set_occlusion(self, mode: str | None) -> None:
+        """How real things hide the model (arapp.render.occlusion): "off", "depth" (the frame's measured
+        depth; frames without depth are drawn unoccluded), "plane" (the world anchor's plane: parts below
+        the table are hidden), or None: "depth" for frames that carry depth, else "off"."""
+        if mode is not None and mode not in OCCLUSION_MODES:
+            raise ValueError(f"occlusion must be one of {', '.join(OCCLUSION_MODES)}, got {mode!r}")
+        self.occlusion = mode
+
+    def occlusion_for(self, depth) -> str:
+        """The occlusion mode used for a frame with (or without, None) depth."""
+        mode = self.occlusion if self.occlusion is not None else ("depth" if depth is not None else "off")
+        return "off" if mode == "depth" and depth is None else mode
+
+    def _occluder(self, depth, camera_from_world):
+        mode = self.occlusion_for(depth)
+        if mode == "off":
+            return None
+        if mode == "plane" and self._plane is None:
+            self._plane = occlusion.PlaneDepth(self.camera)
+        return occlusion.Occluder(mode, depth=depth, plane=self._plane, camera_from_world=camera_from_world)
+
     def set_toolpaths(self, line_sets, world_from_bed: np.ndarray) -> None:
         """Draw toolpaths: line_sets as the renderer takes them (polylines in bed mm), placed by world_from_bed."""
         self.toolpaths = (line_sets, world_from_bed)
@@ -138,11 +165,12 @@ class Pipeline:
             self._renderer = OverlayRenderer(c.K, c.dist, c.width, c.height)
         return self._renderer
 
-    def process(self, image: np.ndarray, t: float, index: int = 0) -> FrameResult:
-        """Track one BGR frame taken at time t (seconds) and, when drawing, composite the overlay."""
+    def process(self, image: np.ndarray, t: float, index: int = 0, depth: np.ndarray | None = None) -> FrameResult:
+        """Track one BGR frame taken at time t (seconds) and, when drawing, composite the overlay.
+        depth: the frame's depth (float32 metres on its pixels, 0 = none) for depth occlusion."""
         res = self.tracker.process(image, t)
         t1 = time.perf_counter()
-        out = self.draw_overlay(image, res.world_from_camera) if self.draw else image
+        out = self.draw_overlay(image, res.world_from_camera, depth) if self.draw else image
         t2 = time.perf_counter()
         if self._last_time is not None and t2 > self._last_time:
             inst = 1.0 / (t2 - self._last_time)
@@ -153,8 +181,10 @@ class Pipeline:
         return FrameResult(index, t, res.world_from_camera, res.state, res.markers, res.inliers,
                            float(res.ms), (t2 - t1) * 1e3, out)
 
-    def draw_overlay(self, image: np.ndarray, world_from_camera: np.ndarray | None) -> np.ndarray:
-        """A copy of the BGR `image` with the model (and toolpaths) drawn as seen from `world_from_camera`.
+    def draw_overlay(self, image: np.ndarray, world_from_camera: np.ndarray | None,
+                     depth: np.ndarray | None = None) -> np.ndarray:
+        """A copy of the BGR `image` with the model (and toolpaths) drawn as seen from `world_from_camera`,
+        hidden where real things are nearer (set_occlusion; `depth` is the frame's, if it has one).
 
         The drawing half of `process`, without tracking: a paused view redraws
         with new settings through it, and the tracker never sees a frame twice.
@@ -163,14 +193,15 @@ class Pipeline:
         if world_from_camera is None:
             return out
         camera_from_world = invert(world_from_camera)
+        occ = self._occluder(depth, camera_from_world) if (self.mesh is not None or self.toolpaths) else None
         if self.mesh is not None:
             out = self.renderer.draw(out, self.mesh, camera_from_world @ self.world_from_model, mode=self.mode,
                                      lines=self.lines if self.mode == "isolines" else None, color=self.color,
-                                     inplace=True)
+                                     inplace=True, occlusion=occ)
         if self.toolpaths is not None:
             line_sets, world_from_bed = self.toolpaths
             out = self.renderer.draw(out, None, camera_from_world @ world_from_bed, line_sets=line_sets,
-                                     inplace=True)
+                                     inplace=True, occlusion=occ)
         return out
 
     def close(self) -> None:

@@ -39,6 +39,7 @@ class ReplayOptions:
     tracker_params: dict = field(default_factory=dict)
     calibration: str | None = None  # calibration file for a plain video (default: the estimated camera)
     anchors: str | None = None  # anchors JSON (default: a recording's own, else the recorder's default)
+    occlusion: str | None = None  # "off", "depth", "plane"; None: depth when the recording has depth, else off
 
 
 def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | None = None,
@@ -58,10 +59,15 @@ def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | 
 
     opened = open_input(recording, calibration=options.calibration, anchors=options.anchors)
     source, camera, anchors = opened.source, opened.camera, opened.anchors
+    if options.occlusion == "depth" and not getattr(source, "has_depth", False):
+        source.close()
+        raise ValueError(f"--occlusion depth: {recording} has no depth stream (docs/recording-format.md, Depth); "
+                         "use --occlusion plane (the anchor's plane) or off")
     for line in opened.notes if say is not None else ():
         say(line)
     pipeline = Pipeline(camera, anchors, model=model, placement=options.placement, mode=options.mode,
-                        slam=options.slam, draw=options.video, tracker_params=options.tracker_params)
+                        slam=options.slam, draw=options.video, tracker_params=options.tracker_params,
+                        occlusion=options.occlusion)
     if options.toolpaths:
         line_sets, world_from_bed = toolpath_overlay(options.toolpaths, options.printer, anchors, options.layer)
         pipeline.set_toolpaths(line_sets, world_from_bed)
@@ -86,7 +92,7 @@ def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | 
                 if cancel is not None and cancel.is_set():
                     interrupted = True
                     break
-                res = pipeline.process(frame.image, frame.t, frame.index)
+                res = pipeline.process(frame.image, frame.t, frame.index, depth=getattr(frame, "depth", None))
                 if res.world_from_camera is not None:
                     poses_f.write(tum_line(frame.t, res.world_from_camera))
                     poses_f.flush()

@@ -113,6 +113,21 @@ class SetMode:
 
 
 @dataclass(frozen=True)
+class SetOcclusion:
+    """How real things hide the model (arapp.pipeline.OCCLUSION_MODES), or None: depth when the frames carry
+    depth, else off."""
+
+    mode: str | None
+
+    def apply(self, engine) -> None:
+        def set_occlusion(pipe):
+            pipe.set_occlusion(self.mode)
+            engine.state["occlusion"] = self.mode
+
+        engine.submit(set_occlusion)
+
+
+@dataclass(frozen=True)
 class Highlight:
     """Ring control point (surface, i, j) of the shown model on screen; None: no ring."""
 

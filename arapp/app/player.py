@@ -33,6 +33,7 @@ class Captured:
     t: float
     image: np.ndarray
     captured_at: float
+    depth: np.ndarray | None = None  # float32 metres on the image's pixels (depth cameras, recordings with depth)
 
 
 
@@ -281,7 +282,8 @@ class Player(threading.Thread):
                 continue
             if self._playing and not self.live and not is_step and not self._pace(float(frame.t)):
                 return
-            item = Captured(int(frame.index), float(frame.t), frame.image, time.perf_counter())
+            item = Captured(int(frame.index), float(frame.t), frame.image, time.perf_counter(),
+                            getattr(frame, "depth", None))
             self.frames_read += 1
             self.last_index = item.index
             if self.recorder is not None:

@@ -69,7 +69,7 @@ def redraw(pipeline, item: Captured, last):
     The draw half of `Pipeline.process` without tracking: settings changed
     while paused show at once, and the tracker never sees a frame twice.
     """
-    out = pipeline.draw_overlay(item.image, last.world_from_camera) if pipeline.draw else item.image
+    out = pipeline.draw_overlay(item.image, last.world_from_camera, item.depth) if pipeline.draw else item.image
     return replace(last, image=out)
 
 
@@ -178,7 +178,9 @@ class Processor(threading.Thread):
                         item, last_result = self._last
                         result = redraw(self.pipeline, item, last_result)
                     else:
-                        result = self.pipeline.process(item.image, item.t, item.index)
+                        # depth only when the frame has it: pipelines stood in by tests take no depth
+                        extra = {} if item.depth is None else {"depth": item.depth}
+                        result = self.pipeline.process(item.image, item.t, item.index, **extra)
                         if self.watch is not None:
                             self.watch(item.image, result.world_from_camera)
                 except Exception as exc:  # noqa: BLE001 - one bad frame must not end the view

@@ -34,7 +34,7 @@ from arapp.app.print_session import PrintSession
 from arapp.app.runner import ImmediateRunner
 from arapp.app.sourcespec import display_name
 from arapp.exchange.meshes import is_mesh_path
-from arapp.pipeline import MODES, load_display_model
+from arapp.pipeline import MODES, OCCLUSION_MODES, load_display_model
 from arapp.placement import Placement, dragged_placement, placement_point_at_pixel
 from tracking.anchors.defaults import DEFAULT_DICTIONARY
 from tracking.anchors.discover import Suggestion
@@ -44,6 +44,7 @@ RECENT_MAX = 8
 # while the print preview stands on the bed, the model on its marker is drawn see-through: one solid part
 # in view, not two (the user may have the bed and the marker in the same picture)
 GHOST_MODE = "translucent"
+OCCLUSION_CHOICES = ("auto", *OCCLUSION_MODES)  # auto: depth when the frames carry depth, else off
 GHOST_NOTE = "Print preview on the bed: the model on the marker is drawn see-through meanwhile"
 # what `arapp markers board` prints by default, so a first sheet is found without editing anchors
 DEFAULT_ANCHORS = [{"kind": "aruco_board", "dictionary": DEFAULT_DICTIONARY, "markers_x": 4, "markers_y": 3,
@@ -131,6 +132,9 @@ class Session:
         self.edits: dict = {}  # (surface, i, j) -> ((x, y, z), weight)
         self.placement: Placement | None = None
         self.mode = str(self.settings.value("mode", "shaded"))
+        self.occlusion = str(self.settings.value("occlusion", "auto"))  # OCCLUSION_CHOICES
+        if self.occlusion not in OCCLUSION_CHOICES:
+            self.occlusion = "auto"
         self.speed = float(self.settings.value("speed", 1.0))
         self.loop = as_bool(self.settings.value("loop", False))
         self.display_size: tuple[int, int] | None = None
@@ -222,6 +226,8 @@ class Session:
         engine.start()
         self.first_picture.start()
         self._push_model()
+        if self.occlusion != "auto":
+            engine.send(cmd.SetOcclusion(self.occlusion))
         if self.highlight is not None:
             engine.send(cmd.Highlight(self.highlight))
         if self.toolpaths_spec is not None:
@@ -510,6 +516,15 @@ class Session:
         self.settings.setValue("mode", mode)
         self.send(cmd.SetMode(self.display_mode))
         self.events.mode_changed.emit(mode)
+
+    def set_occlusion(self, choice: str) -> None:
+        """How real things hide the model: "auto" (depth when the source gives depth, else off), "off",
+        "depth" or "plane" (docs/occlusion.md); kept in the settings."""
+        if choice not in OCCLUSION_CHOICES:
+            raise ValueError(f"occlusion must be one of {', '.join(OCCLUSION_CHOICES)}, got {choice!r}")
+        self.occlusion = choice
+        self.settings.setValue("occlusion", choice)
+        self.send(cmd.SetOcclusion(None if choice == "auto" else choice))
 
     def select_point(self, k: int, i: int, j: int) -> None:
         self.highlight = (int(k), int(i), int(j))

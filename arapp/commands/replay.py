@@ -19,6 +19,10 @@ def add_arguments(parser):
     parser.add_argument("--size", type=float, help="model size on the anchor in mm (default: the model's own)")
     parser.add_argument("--mode", default="shaded", choices=["shaded", "wireframe", "isolines", "translucent"],
                         help="display mode of the model")
+    parser.add_argument("--occlusion", choices=["off", "depth", "plane"],
+                        help="hide the model behind real things: depth (the recording's depth stream), plane (the "
+                        "anchor's plane: parts below the table top), off; default: depth when the recording has "
+                        "depth, else off (docs/occlusion.md)")
     parser.add_argument("--no-slam", action="store_true", help="markers only, no keypoint tracking")
     parser.add_argument("--marker-every", type=int, default=4,
                         help="detect markers every N frames once keypoints carry the pose (1: every frame, "
@@ -54,7 +58,7 @@ def run(args):
                          slam=not args.no_slam, max_frames=args.frames, printer=args.printer,
                          toolpaths=args.toolpaths, layer=args.layer,
                          tracker_params={"marker_every": args.marker_every} if not args.no_slam else {},
-                         calibration=args.calibration, anchors=args.anchors)
+                         calibration=args.calibration, anchors=args.anchors, occlusion=args.occlusion)
     # Written to a temporary folder moved into place at the end: a failure leaves no (empty) --out behind.
     with staged_folder(args.out) as tmp:
         report = replay(args.recording, tmp, opts, progress=terminal_progress(sys.stderr),  # stderr as now

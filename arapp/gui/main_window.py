@@ -134,6 +134,7 @@ class MainWindow(QMainWindow):
         m.open_requested.connect(self.choose_model)
         m.placement_changed.connect(s.set_placement)
         m.mode_changed.connect(s.set_mode)
+        m.occlusion_changed.connect(s.set_occlusion)
         m.point_edited.connect(s.edit_control_point)
         m.point_selected.connect(s.select_point)
         m.print_requested.connect(self.open_print_dialog)
@@ -156,6 +157,7 @@ class MainWindow(QMainWindow):
 
     def _restore_settings(self) -> None:
         self.model_panel.mode.setCurrentText(self.session.mode)
+        self.model_panel.occlusion.setCurrentText(self.session.occlusion)
         self.model_panel.set_library(library_files())
         self.replay.loop.setChecked(as_bool(self.settings.value("loop", False)))
         idx = self.replay.speed.findData(self.session.speed)

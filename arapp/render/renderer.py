@@ -22,7 +22,7 @@ import cv2
 import numpy as np
 import trimesh
 
-from arapp.render import composite, modes, projection
+from arapp.render import composite, modes, occlusion as occlusion_mod, projection
 from arapp.render.gpu import GpuLines, GpuMesh, box_corners
 from arapp.render.gl import RendererError, create_context, release_context
 from tracking.camera import Camera
@@ -111,8 +111,8 @@ class OverlayRenderer:
         # drawn costs a CPU rasteriser per frame (clearing, binning) even outside the scissor box
         self._alloc_framebuffers(min(self.width, 8 * _FBO_STEP), min(self.height, 8 * _FBO_STEP))
         self._readback = None  # reused read-back buffer of the supersampled crop
-        self._last_gl = None  # where the last crop lies in the framebuffer (see _render_crop_gl)
         self._memo = None  # (key, last crop): see _render_crop
+        self._read_depth, self._last_depth = False, None  # the model's depth, read once an occlusion asks
         self._lines_cache: OrderedDict[tuple, tuple] = OrderedDict()  # see _collect_lines
         self._meshes: OrderedDict[int, GpuMesh] = OrderedDict()
         self._linesets: OrderedDict[int, tuple[weakref.ref, GpuLines]] = OrderedDict()
@@ -155,10 +155,13 @@ class OverlayRenderer:
         return out
 
     def draw(self, frame_bgr: np.ndarray, mesh, camera_from_model, mode: str = "shaded", lines=None,
-             color=None, line_sets=None, shadow: bool = False, inplace: bool = False) -> np.ndarray:
+             color=None, line_sets=None, shadow: bool = False, inplace: bool = False,
+             occlusion=None) -> np.ndarray:
         """`frame_bgr` (H, W, 3) uint8 with the overlay composited on it (a copy unless inplace=True).
 
         Arguments as render(). Pixels outside the overlay's footprint are returned unchanged.
+        occlusion: None, or a callable (crop, x0, y0, model_z) -> crop (arapp.render.occlusion.Occluder) that
+        fades out the pixels of the premultiplied crop hidden by the scene, given the model's depth.
         """
         frame = np.asarray(frame_bgr)
         if frame.shape != (self.height, self.width, 3) or frame.dtype != np.uint8:
@@ -167,9 +170,13 @@ class OverlayRenderer:
                 f"got {frame.shape} {frame.dtype}; resize it or build the renderer with Camera.scaled()"
             )
         out = frame if inplace else frame.copy()
+        if occlusion is not None and not self._read_depth:
+            self._read_depth, self._memo = True, None  # from now on every render reads its depth back
         res = self._render_crop(mesh, camera_from_model, mode, lines, color, line_sets, shadow)
         if res is not None:
             crop, x0, y0 = res
+            if occlusion is not None and self._last_depth is not None:
+                crop = occlusion(crop, x0, y0, self._last_depth[0])
             composite.over_bgr(out, crop, x0, y0)
         return out
 
@@ -417,7 +424,6 @@ class OverlayRenderer:
 
     def _render_crop_gl(self, mesh, T, mode, line_list, color, rgba, shadow):
         self._make_current()
-        self._last_gl = None
         GL = self.GL
 
         gmesh = self._gpu_mesh(mesh) if mesh is not None else None
@@ -546,10 +552,8 @@ class OverlayRenderer:
             buf = np.empty((sh, sw, 4), np.uint8)  # returned (and memoised) as it is
         GL.glReadPixels(0, 0, sw, sh, GL.GL_RGBA, GL.GL_UNSIGNED_BYTE, buf)
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
-        # the model's depth stays in the framebuffer (not read back: the colour alone makes the overlay)
-        # until the next draw; this says where it lies, for a depth read-back on demand (occlusion):
-        # the undistorted crop (x0, y0, w, h) in output pixels, its size (sw, sh) in the buffer, near, far
-        self._last_gl = (crop, (sw, sh), near, far)
+        if self._read_depth:  # for occlusion: the model's depth on the same pixels as the crop
+            self._last_depth = occlusion_mod.read_model_depth(self, (sw, sh), crop, out_crop, near, far)
         if (sw, sh) != (w, h):
             # exact area-weighted downsample (premultiplied, so colours average correctly)
             buf = cv2.resize(buf, (w, h), interpolation=cv2.INTER_AREA)

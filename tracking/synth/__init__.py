@@ -19,10 +19,10 @@ __all__ = ["synthesize", "scene_from_arg"]
 
 def scene_from_arg(arg: str):
     """A Scene from a preset name or a scene JSON file path."""
-    from tracking.synth.presets import EXTRA_TUNING, HELD, PRESETS, preset
+    from tracking.synth.presets import EXTRA_TUNING, HELD, OCCLUSION, PRESETS, preset
     from tracking.synth.scene import load_scene, parse_scene
 
-    if arg in PRESETS or arg in EXTRA_TUNING or arg in HELD:
+    if arg in PRESETS or arg in EXTRA_TUNING or arg in HELD or arg in OCCLUSION:
         return parse_scene(preset(arg), f"preset {arg}")
     if arg.endswith(".json") or Path(arg).exists():
         return load_scene(arg)
@@ -35,12 +35,19 @@ def synthesize(scene, out: str | Path, force: bool = False, max_frames: int | No
 
     Writes video (the scene's codec), frames.csv (t = i / fps), session.json
     (source kind `synthetic` with the scene itself) and groundtruth.tum
-    (world_from_camera of every frame, OpenCV camera axes).
+    (world_from_camera of every frame, OpenCV camera axes). A scene with an `occlusion` block also gets
+    depth/ (the simulated depth camera), occlusion/ (ground-truth masks) and occlusion.json
+    (tracking.synth.occlusion).
     """
     from tracking.recorder import RecordingWriter
     from tracking.synth.held import make_renderer
 
-    renderer = make_renderer(scene)
+    if getattr(scene, "occlusion", None):
+        from tracking.synth.occlusion import OcclusionRenderer, write_extras, write_mask
+
+        renderer = OcclusionRenderer(scene)
+    else:
+        renderer = make_renderer(scene)
     n = scene.frame_count if max_frames is None else min(max_frames, scene.frame_count)
     source = {"kind": "synthetic", "generator": "arapp synth", "scene": json.loads(json.dumps(scene.to_dict()))}
     # the camera that "recorded" it states its rolling-shutter readout, as a calibration that measured it would
@@ -51,8 +58,15 @@ def synthesize(scene, out: str | Path, force: bool = False, max_frames: int | No
     with RecordingWriter(out, camera, scene.fps, scene.anchor_blocks, source, scene.fourcc, scene.quality,
                          force) as writer:
         for i in range(n):
-            img, pose, t = renderer.render(i)
-            writer.write(img, t, pose)
+            if getattr(scene, "occlusion", None):
+                f = renderer.render_full(i)
+                writer.write(f.image, f.t, f.pose, depth=f.depth)
+                write_mask(writer.folder, i, f.mask)
+            else:
+                img, pose, t = renderer.render(i)
+                writer.write(img, t, pose)
             if progress:
                 progress(i + 1, n)
+        if getattr(scene, "occlusion", None):
+            write_extras(writer.folder, renderer)
     return writer.close()

@@ -17,8 +17,10 @@ Scene JSON (all keys but `anchors` and `trajectory` optional; metres, seconds, d
                  "chroma_422": true},
      "video": {"fourcc": "MJPG", "quality": 90},
      "supersample": 3,
-     "held": {...}}                                  (optional: a card held before the camera, see
+     "held": {...},                                  (optional: a card held before the camera, see
                                                      tracking.synth.held)
+     "occlusion": {...}}                             (optional: a hand or object passing before a model, with
+                                                     depth and ground-truth masks, see tracking.synth.occlusion)
 
 The desk is the world anchor's paper plane (world z = 0); the camera sees it
 from the out-of-paper side. Desk coordinates: x = world x; y "away" and z up
@@ -84,6 +86,8 @@ class Scene:
     supersample: int = 3
     held: dict | None = None
     """a card held before the camera (tracking.synth.held): the desk is the card, moving in a room"""
+    occlusion: dict | None = None
+    """a hand or object passing before a virtual model, with depth and masks (tracking.synth.occlusion)"""
 
     @property
     def frame_count(self) -> int:
@@ -121,6 +125,7 @@ class Scene:
             "trajectory": self.trajectory, "effects": self.effects,
             "video": {"fourcc": self.fourcc, "quality": self.quality}, "supersample": self.supersample,
             **({"held": self.held} if self.held else {}),
+            **({"occlusion": self.occlusion} if self.occlusion else {}),
         }
 
 
@@ -152,7 +157,7 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
     if not isinstance(data, dict):
         raise SessionError(f"{where}: must be a JSON object")
     known = {"name", "seed", "fps", "duration", "camera", "anchors", "desk", "trajectory", "effects", "video",
-             "supersample", "held"}
+             "supersample", "held", "occlusion"}
     for k in data:
         if k not in known:
             raise SessionError(f"{where}.{k}: unknown key (known: {', '.join(sorted(known))})")
@@ -203,8 +208,17 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
         desk_size=(float(size[0]), float(size[1])), desk_ppm=float(desk.get("ppm", 2000.0)),
         desk_seed=int(desk.get("seed", data.get("seed", 0))), desk_style=style,
         effects=effects, fourcc=str(video.get("fourcc", "MJPG")), quality=int(video.get("quality", 90)),
-        supersample=ss, held=data.get("held"),
+        supersample=ss, held=data.get("held"), occlusion=data.get("occlusion"),
     )
+    if scene.occlusion is not None:
+        from tracking.synth.occlusion import check_occlusion
+
+        if scene.held is not None:
+            raise SessionError(f"{where}.occlusion: not with a held card (held); use a desk scene")
+        if (effects.get("rolling_shutter") or 0) > 0 or (effects.get("motion_blur") or 0) > 0:
+            raise SessionError(f"{where}.occlusion: needs a global shutter without motion blur "
+                               "(effects.rolling_shutter and effects.motion_blur 0)")
+        check_occlusion(scene.occlusion, f"{where}.occlusion")
     if scene.held is not None:
         from tracking.synth.held import check_held
 

@@ -25,6 +25,7 @@ from PySide6.QtWidgets import (
 
 from arapp.exchange.meshes import file_filter
 from arapp.gui.compact_spin import CompactSpin
+from arapp.app.session import OCCLUSION_CHOICES
 from arapp.pipeline import MODES
 from arapp.placement import Placement
 
@@ -63,14 +64,15 @@ class ModelPanel(QWidget):
     """Widgets only; the main window loads models and talks to the pipeline.
 
     Signals: model_chosen(path), placement_changed(arapp.placement.Placement),
-    mode_changed(str), point_selected(surface, i, j), point_edited(surface, i, j, (x, y, z), weight),
-    print_requested().
+    mode_changed(str), occlusion_changed(str), point_selected(surface, i, j),
+    point_edited(surface, i, j, (x, y, z), weight), print_requested().
     """
 
     model_chosen = Signal(str)
     open_requested = Signal()
     placement_changed = Signal(object)
     mode_changed = Signal(str)
+    occlusion_changed = Signal(str)
     point_selected = Signal(int, int, int)
     point_edited = Signal(int, int, int, tuple, float)
     print_requested = Signal()
@@ -120,6 +122,13 @@ class ModelPanel(QWidget):
         self.mode.addItems(MODES)
         self.mode.currentTextChanged.connect(self.mode_changed)
         pf.addRow("Display", self.mode)
+        self.occlusion = QComboBox()
+        self.occlusion.addItems(OCCLUSION_CHOICES)
+        self.occlusion.setToolTip("Hide the model behind real things: depth (a depth camera's or a recording's "
+                                  "depth), plane (below the anchor's table top), off; auto: depth when the "
+                                  "source gives depth, else off")
+        self.occlusion.currentTextChanged.connect(self.occlusion_changed)
+        pf.addRow("Occlusion", self.occlusion)
         for s in (self.size, self.rotation, *self.offset):
             s.valueChanged.connect(self._placement_edited)
         lay.addWidget(place)
