@@ -11,6 +11,7 @@ import numpy as np
 
 from tracking.anchors.dictionaries import aruco_dictionary
 from tracking.anchors.blur import MIN_MARKERS, fit_pose_and_stretch, marker_groups, marker_offsets, spread_enough
+from tracking.anchors.desk import DeskPlane
 from tracking.anchors.detect import ArucoDetection, Observation, detector_parameters
 from tracking.anchors.edges import edge_sharpness, refine_squares
 from tracking.anchors.filter import PoseFilter
@@ -41,6 +42,10 @@ class AnchorResult:
     parts of its edges (AnchorTracker._refit_covered); the measurement counts `refit_weight` in the filter.
     rejected: anchors (indices) detected this frame but left out as inconsistent: never seen before
     in this session and far from where the reference pose puts them (a look-alike pattern).
+    ambiguous: the pose rests on a lone marker whose two IPPE poses both fit (small, seen nearly head-on)
+    and the desk around it has not yet decided between them (`desk.DeskPlane`): its tilt may be off by
+    degrees; tilting the camera (or moving it sideways) decides. desk: the pose was fitted to the marker
+    and the desk keypoints around it together (decided).
     """
 
     world_from_camera: np.ndarray | None = None
@@ -55,6 +60,8 @@ class AnchorResult:
     covered: bool = False
     refitted: bool = False
     rejected: list[int] = field(default_factory=list)
+    ambiguous: bool = False
+    desk: bool = False
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:
@@ -109,7 +116,8 @@ class AnchorTracker:
                  branch_switch: float = 6.0, smear_px: float = 10.0, smear_sharpness: float = 0.15,
                  cover_fraction: float = 0.2, cover_weight: float = 0.1, refit_weight: float = 0.3,
                  new_anchor_gate: float = 0.5, unblur_px: float | None = 2.0, lone_end_margin: float = 0.1,
-                 cover_relax_s: float = 0.2, hold_sigmas: float = 2.0, **filter_params):
+                 cover_relax_s: float = 0.2, hold_sigmas: float = 2.0, desk: bool = True,
+                 desk_ambiguous_px: float = 1.0, **filter_params):
         if not anchors:
             raise ValueError("AnchorTracker needs at least one anchor (the session's anchors list is empty)")
         self.anchors = list(anchors)
@@ -146,6 +154,8 @@ class AnchorTracker:
         self.outlier_px = float(outlier_px)
         self.branch_decay = float(branch_decay)
         self.branch_switch = float(branch_switch)
+        self.desk = DeskPlane(camera) if desk else None
+        self.desk_ambiguous_px = float(desk_ambiguous_px)
         self.reset()
 
     def reset(self) -> None:
@@ -166,6 +176,8 @@ class AnchorTracker:
         self.tracked_keys: set[tuple[int, int]] = set()
         self.trusted: set[int] = set()   # anchors that have carried (or agreed with) the pose this session
         self._projections: dict = {}     # this frame's _project_world results
+        if getattr(self, "desk", None) is not None:
+            self.desk.reset()
 
     def _other_branch_wins(self, obs: list[Observation], sol) -> bool:
         """Accumulate evidence between the two IPPE branches when a single planar anchor carries the pose.
@@ -279,8 +291,9 @@ class AnchorTracker:
             sol = self._unstretch(obs, sol)
         self.frame += 1
         res = AnchorResult()
+        desk = self._desk_update(gray, obs, sol)
         if sol is not None:
-            raw = sol.world_from_camera
+            raw = sol.world_from_camera if desk is None or not desk.decided else invert(desk.camera_from_world)
             depth = float(median((sol.world @ sol.camera_from_world[:3, :3].T + sol.camera_from_world[:3, 3])[:, 2]))
             # The measurement's noise in radians: pixel noise (the residual corrected for the 6 pose
             # parameters, at least 0.1 px) over the points' extent, times the lever f/extent that makes
@@ -302,6 +315,11 @@ class AnchorTracker:
             # a pose on one square's four corners (a lone marker) shows the orbit mode about their centre
             # far worse than the rest: the filter gives that mode its own, lower gain (filter.py)
             centre = np.mean(sol.world, axis=0) if n <= 4 else None
+            if desk is not None and desk.decided:
+                # the desk's keypoints hold the tilt the corners cannot: the measurement is as good as its fit
+                sigma, centre = max(desk.sigma, 1e-4), None
+            res.ambiguous = desk is not None and not desk.decided or (desk is None and self._desk_undecided())
+            res.desk = desk is not None and desk.decided
             filt = self.filter.update(raw, t, depth, sigma, weight=weight, centre=centre)
             filt = self._hold_to_corners(filt, raw, sol.world, px_sigma / max(weight, 1e-3))
             # (a restart leaves the state on this measurement alone; a down-weighted one counts as noisier)
@@ -325,6 +343,26 @@ class AnchorTracker:
         res.rejected = rejected
         res.ms = (time.perf_counter() - t0) * 1000.0
         return res
+
+    def _desk_update(self, gray, obs: list[Observation], sol):
+        """The desk's fit (`desk.DeskPlane.update`) when a lone square marker carries the pose and its two IPPE
+        poses both fit its corners within `desk_ambiguous_px` RMS (or the desk is followed already); None
+        otherwise (the desk is then forgotten when no lone marker is seen)."""
+        if self.desk is None:
+            return None
+        lone = (sol is not None and len(obs) == 1 and len(sol.world) == 4 and len(sol.branches) == 2
+                and self.models[obs[0].anchor].anchor_kind.single_square)
+        if not lone:
+            self.desk.reset()
+            return None
+        if not self.desk.active:
+            rms = [float(np.sqrt(np.mean(r ** 2))) for _, r in sol.branches]
+            if max(rms) > self.desk_ambiguous_px:
+                return None
+        return self.desk.update(gray, sol.world, sol.img, [cfw for cfw, _ in sol.branches])
+
+    def _desk_undecided(self) -> bool:
+        return self.desk is not None and self.desk.active and not self.desk.decided
 
     def _hold_to_corners(self, filt: np.ndarray, raw: np.ndarray, world: np.ndarray, px_sigma: float) -> np.ndarray:
         """The filtered pose `filt` (world_from_camera), corrected just enough that the anchor points it rests
