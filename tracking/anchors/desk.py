@@ -83,13 +83,14 @@ class DeskPlane:
     the other minimum must fit to be excluded."""
 
     def __init__(self, camera: Camera, max_points: int = 250, min_points: int = 40, marker_px: float = 0.3,
-                 desk_px: float = 0.3, decide_deg: float = 0.5, exclude_chi2: float = 25.0):
+                 desk_px: float = 0.3, decide_deg: float = 1.0, exclude_chi2: float = 25.0):
         self.camera = camera
         self.max_points, self.min_points = int(max_points), int(min_points)
         self.marker_px, self.desk_px = float(marker_px), float(desk_px)
         self.decide = np.radians(decide_deg)
         self.exclude_chi2 = float(exclude_chi2)
         self.f = float(np.sqrt(camera.fx * camera.fy))
+        self.free_every = 5
         self.reset()
 
     def reset(self) -> None:
@@ -104,6 +105,10 @@ class DeskPlane:
         self._last: np.ndarray | None = None        # last frame's fitted pose (params, 6)
         self._excluded = False                      # the other minimum was seen to fit clearly worse
         self._seeded = 0
+        self._ref_px: np.ndarray | None = None     # the desk points in the reference frame (pixels, as seen)
+        self._ref_deskewed = False                  # ... moved to the reference's centre-row time yet
+        self._prev_t: float | None = None
+        self._frames = 0                            # frames fitted since the reference was taken
         self.decided = False
 
     @property
@@ -115,14 +120,15 @@ class DeskPlane:
         return cv2.undistortPoints(np.asarray(px, np.float64).reshape(-1, 1, 2), self.camera.K,
                                    self.camera.dist).reshape(-1, 2)
 
-    def _seed(self, gray: np.ndarray, world: np.ndarray, img: np.ndarray, branches: list[np.ndarray],
+    def _seed(self, gray: np.ndarray, t: float, world: np.ndarray, img: np.ndarray, branches: list[np.ndarray],
               ref: np.ndarray | None, ref_sigma: float) -> None:
         pts = cv2.goodFeaturesToTrack(gray, self.max_points, 0.01, 12, blockSize=7)
         if pts is None or len(pts) < self.min_points:
             self._ref_x = None
             return
         pts = pts.reshape(-1, 2).astype(np.float32)
-        self._prev_gray, self._prev_px = gray, pts
+        self._prev_gray, self._prev_px, self._prev_t = gray, pts, t
+        self._ref_px, self._ref_deskewed, self._frames = pts, self.camera.readout <= 0, 0
         self._ref_x = self._normalised(pts)
         self._ref_marker = (np.asarray(world, float), self._normalised(img))
         self._ref_branches = list(branches)
@@ -130,16 +136,28 @@ class DeskPlane:
         self._ref_sigma = ref_sigma if ref is not None else np.inf
         self._seeded = len(pts)
 
-    def _follow(self, gray: np.ndarray) -> np.ndarray:
-        """The desk points followed into `gray` (forward-backward checked); keeps only those. Their pixels."""
+    def _follow(self, gray: np.ndarray, t: float) -> np.ndarray:
+        """The desk points followed into `gray` (forward-backward checked); keeps only those. Their pixels, moved
+        to the frame's centre-row time for a rolling shutter (`camera.readout`): each point by its own image
+        velocity since the last frame times its row's offset (the reference frame's points likewise, with the
+        velocity to the frame after it, once)."""
         nxt, st, _ = cv2.calcOpticalFlowPyrLK(self._prev_gray, gray, self._prev_px, None, **_LK)
         back, st2, _ = cv2.calcOpticalFlowPyrLK(gray, self._prev_gray, nxt, None, **_LK)
         ok = (st.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm(back - self._prev_px, axis=1) < 0.5)
         h, w = gray.shape
         ok &= (nxt[:, 0] >= 0) & (nxt[:, 0] < w) & (nxt[:, 1] >= 0) & (nxt[:, 1] < h)
-        self._prev_px, self._ref_x = nxt[ok], self._ref_x[ok]
+        prev = self._prev_px[ok]
+        self._prev_px, self._ref_x, self._ref_px = nxt[ok], self._ref_x[ok], self._ref_px[ok]
         self._prev_gray = gray
-        return self._prev_px
+        dt = t - self._prev_t if self._prev_t is not None else 0.0
+        self._prev_t = t
+        if self.camera.readout <= 0 or not 0 < dt <= 0.2:
+            return self._prev_px
+        vel = (self._prev_px - prev) / dt
+        if not self._ref_deskewed:
+            ref = self._ref_px - vel * self.camera.row_offsets(self._ref_px[:, 1])[:, None]
+            self._ref_x, self._ref_deskewed = self._normalised(ref), True
+        return self._prev_px - vel * self.camera.row_offsets(self._prev_px[:, 1])[:, None]
 
     def _residuals(self, p: np.ndarray, marker_c, xr: np.ndarray, xc: np.ndarray, fixed_ref: np.ndarray | None):
         """Normalised residuals (in standard deviations) of the joint fit: p = [reference pose, this pose]
@@ -161,7 +179,7 @@ class DeskPlane:
         """(params, cost in squared standard deviations, tilt sigma of this pose (rad), of the reference's)."""
         try:
             r = least_squares(self._residuals, start, method="lm", args=(marker_c, xr, xc, fixed_ref),
-                              x_scale="jac", max_nfev=200)
+                              x_scale="jac", max_nfev=60)
         except (ValueError, np.linalg.LinAlgError):
             return None
         try:
@@ -172,7 +190,7 @@ class DeskPlane:
         n = len(start)
         return r.x, 2.0 * float(r.cost), sig(n - 6), (sig(0) if n == 12 else np.inf)
 
-    def update(self, gray: np.ndarray, world: np.ndarray, img: np.ndarray, branches: list[np.ndarray]) -> DeskFit | None:
+    def update(self, gray: np.ndarray, t: float, world: np.ndarray, img: np.ndarray, branches: list[np.ndarray]) -> DeskFit | None:
         """One frame with a lone marker: its corners `world` (4,3 metres) at `img` (4,2 pixels) and its IPPE
         poses `branches` (camera_from_world). None while there is no fit yet (the first frame, too few
         desk points, a fit that failed)."""
@@ -180,13 +198,13 @@ class DeskPlane:
             self.reset()
             return None
         if not self.active or self._prev_gray is None or self._prev_gray.shape != gray.shape:
-            self._seed(gray, world, img, branches, None, np.inf)
+            self._seed(gray, t, world, img, branches, None, np.inf)
             return None
-        px = self._follow(gray)
+        px = self._follow(gray, t)
         if len(px) < max(self.min_points, self._seeded // 3):
             ref = None if self._last is None else _pose(self._last)
             sigma = self._ref_sigma if self.decided else np.inf
-            self._seed(gray, world, img, branches, ref, sigma)
+            self._seed(gray, t, world, img, branches, ref, sigma)
             return None
         xc = self._normalised(px)
         xr = self._ref_x
@@ -197,18 +215,24 @@ class DeskPlane:
         inl = inl.ravel().astype(bool)
         xr, xc = xr[inl], xc[inl]
         marker_c = (np.asarray(world, float), self._normalised(img))
-        starts = self._starts(branches)
-        fits = [f for f in (self._fit(s, marker_c, xr, xc) for s in starts) if f is not None]
-        if not fits:
+        self._frames += 1
+        fits = []
+        if not self.decided or self._frames % self.free_every == 0:
+            # the joint fit with the reference pose free (every `free_every` frames once decided: it only
+            # improves the reference as the camera moves further)
+            fits = [f for f in (self._fit(s, marker_c, xr, xc) for s in self._starts(branches)) if f is not None]
+            fits.sort(key=lambda f: f[1])
+        if not fits and self._ref_best is None:
             return None
-        fits.sort(key=lambda f: f[1])
-        best = fits[0]
-        if not self._excluded and len(fits) > 1:
+        best = fits[0] if fits else None
+        if best is not None and not self._excluded and len(fits) > 1:
             other = next((f for f in fits[1:] if rotation_angle(_rot(f[0][6:])[0] @ _rot(best[0][6:])[0].T)
                           > 3 * max(best[2], np.radians(0.3))), None)
             # the other minimum fits clearly worse (or is no minimum: the fit from it came to this one)
             self._excluded = (other is None or other[1] - best[1] > self.exclude_chi2) and best[2] < 2 * self.decide
-        if best[3] < self._ref_sigma:
+        elif best is not None and len(fits) == 1 and not self._excluded:
+            self._excluded = best[2] < 2 * self.decide and len(self._ref_branches) < 2
+        if best is not None and best[3] < self._ref_sigma:
             self._ref_best, self._ref_sigma = best[0][:6].copy(), best[3]
         start = best[0][6:] if self._last is None else self._last
         held = self._fit(start, marker_c, xr, xc, fixed_ref=self._ref_best)

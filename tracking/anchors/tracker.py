@@ -291,7 +291,7 @@ class AnchorTracker:
             sol = self._unstretch(obs, sol)
         self.frame += 1
         res = AnchorResult()
-        desk = self._desk_update(gray, obs, sol)
+        desk = self._desk_update(gray, t, obs, sol)
         if sol is not None:
             raw = sol.world_from_camera if desk is None or not desk.decided else invert(desk.camera_from_world)
             depth = float(median((sol.world @ sol.camera_from_world[:3, :3].T + sol.camera_from_world[:3, 3])[:, 2]))
@@ -344,7 +344,7 @@ class AnchorTracker:
         res.ms = (time.perf_counter() - t0) * 1000.0
         return res
 
-    def _desk_update(self, gray, obs: list[Observation], sol):
+    def _desk_update(self, gray, t: float, obs: list[Observation], sol):
         """The desk's fit (`desk.DeskPlane.update`) when a lone square marker carries the pose and its two IPPE
         poses both fit its corners within `desk_ambiguous_px` RMS (or the desk is followed already); None
         otherwise (the desk is then forgotten when no lone marker is seen)."""
@@ -359,7 +359,7 @@ class AnchorTracker:
             rms = [float(np.sqrt(np.mean(r ** 2))) for _, r in sol.branches]
             if max(rms) > self.desk_ambiguous_px:
                 return None
-        return self.desk.update(gray, sol.world, sol.img, [cfw for cfw, _ in sol.branches])
+        return self.desk.update(gray, t, sol.world, sol.img, [cfw for cfw, _ in sol.branches])
 
     def _desk_undecided(self) -> bool:
         return self.desk is not None and self.desk.active and not self.desk.decided
