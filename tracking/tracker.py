@@ -126,6 +126,7 @@ class TrackResult:
     markers: int
     inliers: int
     ms: float
+    ambiguous: bool = False   # the pose rests on a lone head-on marker the desk has not yet judged (issue 25.4)
 
 
 @dataclass
@@ -835,7 +836,8 @@ class Tracker:
         self._last_out = out
         self._prev_gray = self._gray
         self._via_flow = False
-        return TrackResult(out, state, markers, inliers, (time.perf_counter() - t0) * 1000.0)
+        return TrackResult(out, state, markers, inliers, (time.perf_counter() - t0) * 1000.0,
+                           ambiguous=state == "marker" and self._anchors.ambiguous)
 
     # -- pieces ---------------------------------------------------------------------
     def _klt_frame(self, gray, t, t0) -> TrackResult | None:
@@ -1234,4 +1236,4 @@ class Tracker:
             return self._lost_frame(t0, int(ar.markers))
         self._lost = 0
         return TrackResult(np.asarray(ar.world_from_camera, float), "marker", int(ar.markers), int(ar.inliers),
-                           (time.perf_counter() - t0) * 1000.0)
+                           (time.perf_counter() - t0) * 1000.0, ambiguous=ar.ambiguous)
