@@ -62,6 +62,10 @@ class AnchorTracker:
     hold_sigmas: the filtered pose never projects the anchor points it rests on further than this many
     times the measurement's pixel noise from where the frame's own solution does (`_hold_to_corners`; the
     filter's lag behind an accelerating camera or anchor); 0 turns the hold off.
+    desk / desk_ambiguous_px: a lone square marker whose two IPPE poses both fit its corners within
+    `desk_ambiguous_px` RMS (small, seen nearly head-on) is judged by the desk around it (desk.DeskPlane: its
+    keypoints followed from a reference frame fix the plane's tilt); until that decides, results say
+    `ambiguous`, and once it has, the desk's fit is the frame's measurement. False: never.
     """
 
     def __init__(self, anchors: list[AnchorSpec], camera: Camera, filter: bool = True, *, roi: bool = True,
