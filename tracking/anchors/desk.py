@@ -32,7 +32,7 @@ from scipy.optimize import least_squares
 from tracking.camera import Camera
 from tracking.poses import from_rvec_tvec, rotation_angle, to_rvec_tvec
 
-_LK = dict(winSize=(21, 21), maxLevel=3, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01))
+_LK = dict(winSize=(15, 15), maxLevel=2, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01))
 
 
 @dataclass
