@@ -5,8 +5,8 @@ AnchorResult, plain_opencv_pose (the plain OpenCV baseline), PoseFilter (the SE(
 Modules: kinds (the anchor kinds: fields, geometry, drawing, words), model (anchor geometry), detect (ArUco/ChArUco detection and marker tracking), edges (subpixel
 corners by edge fitting), qr (QR decode + finder-corner tracking), pose (IPPE hypotheses, fused PnP,
 outlier rejection, LM), filter, tracker (result: its AnchorResult; plain: the plain OpenCV baseline; hold:
-the filtered pose held to the corners; desk: the desk around a lone head-on marker judging its tilt), diagnose (why anchors are not found), render (synthetic views
-and the drawing used by printable sheets).
+the filtered pose held to the corners; desk: the desk around a lone head-on marker judging its tilt),
+diagnose (why anchors are not found), render (synthetic views and the drawing used by printable sheets).
 """
 
 import importlib

@@ -190,9 +190,10 @@ class DeskPlane:
         n = len(start)
         return r.x, 2.0 * float(r.cost), sig(n - 6), (sig(0) if n == 12 else np.inf)
 
-    def update(self, gray: np.ndarray, t: float, world: np.ndarray, img: np.ndarray, branches: list[np.ndarray]) -> DeskFit | None:
-        """One frame with a lone marker: its corners `world` (4,3 metres) at `img` (4,2 pixels) and its IPPE
-        poses `branches` (camera_from_world). None while there is no fit yet (the first frame, too few
+    def update(self, gray: np.ndarray, t: float, world: np.ndarray, img: np.ndarray,
+               branches: list[np.ndarray]) -> DeskFit | None:
+        """One frame (grey image `gray` taken at `t` seconds) with a lone marker: its corners `world` (4,3
+        metres) at `img` (4,2 pixels) and its IPPE poses `branches` (camera_from_world). None while there is no fit yet (the first frame, too few
         desk points, a fit that failed)."""
         if len(branches) == 0 or len(world) < 4:
             self.reset()
