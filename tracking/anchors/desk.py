@@ -193,8 +193,8 @@ class DeskPlane:
     def update(self, gray: np.ndarray, t: float, world: np.ndarray, img: np.ndarray,
                branches: list[np.ndarray]) -> DeskFit | None:
         """One frame (grey image `gray` taken at `t` seconds) with a lone marker: its corners `world` (4,3
-        metres) at `img` (4,2 pixels) and its IPPE poses `branches` (camera_from_world). None while there is no fit yet (the first frame, too few
-        desk points, a fit that failed)."""
+        metres) at `img` (4,2 pixels) and its IPPE poses `branches` (camera_from_world). None while there is
+        no fit yet (the first frame, too few desk points, a fit that failed)."""
         if len(branches) == 0 or len(world) < 4:
             self.reset()
             return None
