@@ -64,3 +64,13 @@ def lost_hint(anchors, camera=None, estimated: bool = False) -> str:
     if estimated:
         how += " The camera is uncalibrated: sizes are approximate."
     return f"{first}.\n{how}"
+
+
+AMBIGUOUS_HINT = ("The marker is seen head-on: its tilt is uncertain. Tilt the camera a little (or move it sideways) "
+                  "over the desk around the marker until this goes.")
+
+
+def ambiguous_hint() -> str:
+    """The line for the view while the pose rests on a lone marker seen nearly head-on whose two possible tilts
+    the desk around it has not yet told apart (`TrackResult.ambiguous`, issue 25.4)."""
+    return AMBIGUOUS_HINT

@@ -178,8 +178,10 @@ class Pipeline:
         self._last_time = t2
         if self.draw and self.status_line:
             draw_status(out, res.state, self._fps, res.markers, res.inliers)
+        # "ambiguous": a lone head-on marker's tilt not yet decided (TrackResult.ambiguous; the view asks for a tilt)
         return FrameResult(index, t, res.world_from_camera, res.state, res.markers, res.inliers,
-                           float(res.ms), (t2 - t1) * 1e3, out)
+                           float(res.ms), (t2 - t1) * 1e3, out,
+                           extra={"ambiguous": True} if getattr(res, "ambiguous", False) else {})
 
     def draw_overlay(self, image: np.ndarray, world_from_camera: np.ndarray | None,
                      depth: np.ndarray | None = None) -> np.ndarray:

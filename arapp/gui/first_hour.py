@@ -133,7 +133,8 @@ class FirstHour:
         info = self.w.session.source_info
         if info is None:
             return
-        self.hint.update_state(shown.result.state, info.anchors, info.camera, is_estimated(info.camera))
+        self.hint.update_state(shown.result.state, info.anchors, info.camera, is_estimated(info.camera),
+                               ambiguous=bool((getattr(shown.result, "extra", None) or {}).get("ambiguous")))
         if not self.hint.isHidden():
             self._place_hint()
 

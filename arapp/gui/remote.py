@@ -145,7 +145,8 @@ class _Child:
                 "pose": None if r.world_from_camera is None else np.asarray(r.world_from_camera).tolist(),
                 "captured_at": shown.captured_at, "processed_at": shown.processed_at,
                 "dropped": shown.dropped_capture, "w": bgra.shape[1], "h": bgra.shape[0],
-                "full": self.full_frames, **{k: r.extra[k] for k in STATE_KEYS}}
+                "full": self.full_frames, **{k: r.extra[k] for k in STATE_KEYS},
+                "ambiguous": bool(r.extra.get("ambiguous", False))}   # a head-on marker's tilt undecided
         if not self.full_frames:
             # the picture goes through shared memory; the pipe carries the metadata and the slot's number
             if self.ring is None or not self.ring.fits(bgra):
@@ -336,6 +337,8 @@ class RemoteEngine(EngineSignals):
             frame = np.frombuffer(full[1], np.uint8).reshape(shape)
         pose = None if meta["pose"] is None else np.asarray(meta["pose"], float)
         extra = {k: meta[k] for k in STATE_KEYS}
+        if meta.get("ambiguous"):
+            extra["ambiguous"] = True
         result = FrameResult(meta["index"], meta["t"], pose, meta["state"], meta["markers"], meta["inliers"],
                              meta["ms_track"], meta["ms_render"], image, extra)
         shown = Shown(result, bgra, frame, meta["captured_at"], meta["processed_at"],

@@ -28,7 +28,7 @@ from PySide6.QtWidgets import (
 
 from tracking.default_intrinsics import is_estimated
 
-from arapp.guidance import lost_hint
+from arapp.guidance import ambiguous_hint, lost_hint
 
 RECORDINGS_DIR = Path(__file__).resolve().parents[2] / "recordings"
 # what each bundled recording shows (tracking/synth/presets.py makes them)
@@ -129,8 +129,9 @@ class WelcomeView(QWidget):
 
 
 class LostHint(QLabel):
-    """A label showing `arapp.guidance.lost_hint` once tracking has been 'lost' for `delay_s` seconds;
-    hidden while anything is tracked. `update_state(state, anchors, camera, estimated)` per frame shown."""
+    """A label showing `arapp.guidance.lost_hint` once tracking has been 'lost' for `delay_s` seconds, or
+    `ambiguous_hint` ("tilt the camera") while the pose is `ambiguous`; hidden while anything else is tracked.
+    `update_state(state, anchors, camera, estimated, ambiguous=...)` per frame shown."""
 
     def __init__(self, delay_s: float = 1.0, parent=None):
         super().__init__(parent)
@@ -142,8 +143,14 @@ class LostHint(QLabel):
         self.hide()
 
     def update_state(self, state: str, anchors, camera=None, estimated: bool = False,
-                     now: float | None = None) -> None:
+                     now: float | None = None, ambiguous: bool = False) -> None:
         now = time.monotonic() if now is None else now
+        if ambiguous and state != "lost":
+            # tracked, but on a head-on marker whose tilt is not yet decided: ask for a tilt at once
+            self._lost_since = None
+            self.setText(ambiguous_hint())
+            self.show()
+            return
         if state != "lost":
             self._lost_since = None
             self.hide()

@@ -494,7 +494,8 @@ class Tracker:
         st.lost = 0
         st.last_state = state
         self.flow.tracked(frame.gray)
-        return TrackResult(out, state, markers, inliers, frame.ms())
+        return TrackResult(out, state, markers, inliers, frame.ms(),
+                           ambiguous=state == "marker" and self.anchor_tracker.ambiguous)
 
     def _lost_frame(self, markers: int) -> TrackResult:
         """A frame without a pose."""
@@ -513,4 +514,4 @@ class Tracker:
             return self._lost_frame(int(ar.markers))
         self.status.lost = 0
         return TrackResult(np.asarray(ar.world_from_camera, float), "marker", int(ar.markers), int(ar.inliers),
-                           self.frame.ms())
+                           self.frame.ms(), ambiguous=ar.ambiguous)

@@ -19,10 +19,10 @@ __all__ = ["synthesize", "scene_from_arg"]
 
 def scene_from_arg(arg: str):
     """A Scene from a preset name or a scene JSON file path."""
-    from tracking.synth.presets import EXTRA_TUNING, HELD, OCCLUSION, PRESETS, preset
+    from tracking.synth.presets import EXTRA_TUNING, HEADON, HELD, OCCLUSION, PRESETS, preset
     from tracking.synth.scene import load_scene, parse_scene
 
-    if arg in PRESETS or arg in EXTRA_TUNING or arg in HELD or arg in OCCLUSION:
+    if arg in PRESETS or arg in EXTRA_TUNING or arg in HELD or arg in OCCLUSION or arg in HEADON:
         return parse_scene(preset(arg), f"preset {arg}")
     if arg.endswith(".json") or Path(arg).exists():
         return load_scene(arg)
