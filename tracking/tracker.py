@@ -391,6 +391,19 @@ class Tracker:
     def __exit__(self, *exc):
         self.close()
 
+    def load_map(self, saved: Map) -> None:
+        """Start from a saved map (a scene file, tracking.slam.map_io): forget the motion, so the next
+        frames relocalise against every saved keyframe; new keyframes extend it."""
+        from tracking.slam.map_io import adopt
+
+        self.reset()
+        adopt(self.map, saved)
+
+    def export_map(self) -> Map:
+        """The map as it stands once queued keyframes are mapped (to save in a scene file)."""
+        self.wait_mapping()
+        return self.map
+
     def wait_mapping(self) -> None:
         """Block until queued keyframes are mapped (offline replay, tests)."""
         if self.mapper is not None:

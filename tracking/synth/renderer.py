@@ -93,6 +93,8 @@ class DeskRenderer:
             # Desk (x, y) -> anchor (x, y): the in-plane part of anchor_from_desk.
             A = invert(a.world_from_anchor) @ self.world_from_desk
             self.patterns.append((pattern_for(a), A[:2, [0, 1, 3]].astype(np.float64)))
+        # the anchors printed on the desk (none when the scene has them taken away: `desk.anchors_shown`)
+        self.printed = self.patterns if scene.anchors_shown else []
         self.centre = c
         self.pose_desk = make_trajectory(scene.trajectory, scene.duration, scene.seed)
         self.rng = np.random.default_rng(scene.seed + 101)
@@ -142,7 +144,7 @@ class DeskRenderer:
                         borderValue=FLOOR_BGR.tolist()).astype(np.float32)
         step = 4  # find each anchor's paper on a coarse grid first, then evaluate cells only around it
         H, W = ok.shape
-        for pat, A in self.patterns:
+        for pat, A in self.printed:
             # desk (x, y) -> print (p, q): affine, so rays -> (p, q) is one homography too
             to_print = np.array([[pat.sx, 0.0, -pat.origin[0] * pat.sx], [0.0, pat.sy, -pat.origin[1] * pat.sy],
                                  [0.0, 0.0, 1.0]]) @ np.vstack([A, [0.0, 0.0, 1.0]]) @ Hd
@@ -225,7 +227,7 @@ class DeskRenderer:
                         borderValue=FLOOR_BGR.tolist()).astype(np.float32)
         step = 4  # find each anchor's paper on a coarse grid first, then evaluate cells only around it
         H, W = valid.shape
-        for pat, A in self.patterns:
+        for pat, A in self.printed:
             def paper_and_value(rs, cs):
                 xd, yd = x[rs, cs].astype(np.float64), y[rs, cs].astype(np.float64)
                 p, q = pat.print_coords(A[0, 0] * xd + A[0, 1] * yd + A[0, 2], A[1, 0] * xd + A[1, 1] * yd + A[1, 2])

@@ -6,7 +6,9 @@ Scene JSON (all keys but `anchors` and `trajectory` optional; metres, seconds, d
      "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": [k1, k2, p1, p2, k3]}
                or {"width": ..., "height": ..., "K": [[...]], "dist": [...]},
      "anchors": [ ...exactly as in session.json... ],
-     "desk": {"size": [1.4, 1.0], "ppm": 2000, "seed": 3, "style": "desk", "bed" or "tiles"},
+     "desk": {"size": [1.4, 1.0], "ppm": 2000, "seed": 3, "style": "desk", "bed" or "tiles",
+              "anchors_shown": true},                (false: the anchors are taken off the desk; they
+                                                     still define the world frame of the ground truth)
      "trajectory": {"kind": "orbit", ...}            (see tracking.synth.trajectory),
      "effects": {"noise": 2.0, "motion_blur": 0.0, "blur_samples": 7,
                  "exposure": {"amplitude": 0.2, "period": 2.0},
@@ -83,6 +85,7 @@ class Scene:
     quality: int = 90
     supersample: int = 3
     held: dict | None = None
+    anchors_shown: bool = True   # false: the desk without its anchors (a revisit with the marker removed)
     """a card held before the camera (tracking.synth.held): the desk is the card, moving in a room"""
 
     @property
@@ -117,7 +120,7 @@ class Scene:
             "name": self.name, "seed": self.seed, "fps": self.fps, "duration": self.duration,
             "camera": self.camera.to_dict(), "anchors": self.anchor_blocks,
             "desk": {"size": list(self.desk_size), "ppm": self.desk_ppm, "seed": self.desk_seed,
-                     "style": self.desk_style},
+                     "style": self.desk_style, **({} if self.anchors_shown else {"anchors_shown": False})},
             "trajectory": self.trajectory, "effects": self.effects,
             "video": {"fourcc": self.fourcc, "quality": self.quality}, "supersample": self.supersample,
             **({"held": self.held} if self.held else {}),
@@ -203,7 +206,7 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
         desk_size=(float(size[0]), float(size[1])), desk_ppm=float(desk.get("ppm", 2000.0)),
         desk_seed=int(desk.get("seed", data.get("seed", 0))), desk_style=style,
         effects=effects, fourcc=str(video.get("fourcc", "MJPG")), quality=int(video.get("quality", 90)),
-        supersample=ss, held=data.get("held"),
+        supersample=ss, held=data.get("held"), anchors_shown=_shown(desk, f"{where}.desk.anchors_shown"),
     )
     if scene.held is not None:
         from tracking.synth.held import check_held
@@ -212,6 +215,13 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
 
     make_trajectory(scene.trajectory, scene.duration, scene.seed, f"{where}.trajectory")  # validate now
     return scene
+
+
+def _shown(desk: dict, where: str) -> bool:
+    v = desk.get("anchors_shown", True)
+    if not isinstance(v, bool):
+        raise SessionError(f"{where}: must be true or false, got {v!r}")
+    return v
 
 
 _EFFECT_KEYS = {"auto_exposure": {"target", "speed", "initial_gain", "min_gain", "max_gain"},
