@@ -13,7 +13,6 @@ bytes per keyframe. Goals (issue 30): >= 95 % relocalise within 1 s, position <=
 
 from __future__ import annotations
 
-import hashlib
 import json
 import sys
 import tempfile
@@ -28,18 +27,9 @@ GOAL_S, GOAL_M, GOAL_DEG = 1.0, 0.01, 1.0
 
 def recording(name: str) -> Path:
     """The folder of the revisit recording `name`, rendered on first use (build/synth/<name>-<hash>)."""
-    from arapp.exchange.staging import staged_folder
-    from tracking.synth import synthesize
-    from tracking.synth.revisits import revisit_by_name
-    from tracking.synth.scene import parse_scene
+    from tracking.synth.revisits import revisit_folder
 
-    data = revisit_by_name(name)
-    digest = hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
-    folder = ROOT / "build" / "synth" / f"{name}-{digest}"
-    if not (folder / "groundtruth.tum").is_file():
-        with staged_folder(folder, replace=True) as tmp:
-            synthesize(parse_scene(data, name), tmp, force=True)
-    return folder
+    return revisit_folder(name, ROOT / "build" / "synth")
 
 
 def frames_of(folder: Path):
@@ -81,8 +71,9 @@ def make_scene(set_name: str, out: Path) -> tuple[Path, dict]:
     return out, facts
 
 
-def run_revisit(scene_path: Path, name: str) -> dict:
-    """Start a fresh tracker on `scene_path` and track the revisit `name`; the figures of one revisit."""
+def run_revisit(scene_path: Path | None, name: str) -> dict:
+    """Start a fresh tracker on `scene_path` (None: without a scene, the baseline) and track the revisit
+    `name`; the figures of one revisit."""
     from arapp.scene_session import SceneRun
     from tracking.poses import rotation_angle
     from tracking.tracker import Tracker
@@ -130,6 +121,10 @@ def measure(set_name: str, revisits: int, variants=None) -> tuple[dict, list[dic
         scene_path, facts = make_scene(set_name, Path(tmp) / "desk.arscene")
         rows = [run_revisit(scene_path, f"{set_name}_revisit_{i}_{v}")
                 for i in range(revisits) for v in (variants or VARIANTS)]
+    # the baseline: the revisits without the marker, started without the scene file
+    base = [run_revisit(None, r["name"]) for r in rows if "bare" in r["name"]]
+    facts["without_scene"] = {"revisits": len(base), "frames": sum(b["frames"] for b in base),
+                              "tracked": sum(b["tracked"] for b in base)}
     return facts, rows
 
 
@@ -166,6 +161,10 @@ def table(facts: dict, rows: list[dict]) -> str:
     file_line = (f"Scene file: {facts['bytes'] / 1e6:.2f} MB for {facts['keyframes']} keyframes and {facts['points']} "
                  f"map points, {facts['bytes'] / max(facts['keyframes'], 1) / 1e3:.0f} kB per keyframe; saved in "
                  f"{facts['save_s']:.2f} s, loaded in {np.median([r['load_s'] for r in rows]):.2f} s (median).")
+    ws = facts.get("without_scene")
+    if ws and ws["revisits"]:
+        file_line += (f" Without the scene file the {ws['revisits']} revisits without the marker track "
+                      f"{ws['tracked']} of {ws['frames']} frames (nothing else defines the world).")
     check_line = ""
     if checks:
         d = [c["position_m"] for c in checks]
