@@ -165,6 +165,26 @@ def read_scene(path, camera: Camera | None = None) -> SceneFile:
     return SceneFile(saved_camera, doc["anchors"], models, m, list(doc.get("history") or []))
 
 
+def read_scene_models(path) -> list[dict]:
+    """The placed models of a scene file (paths absolute), from its scene.json alone (the map is not read)."""
+    p = Path(path)
+    if not p.is_file():
+        raise SceneError(f"{p}: no such scene file; save one first (GUI: File > Save scene, "
+                         "replay: --save-scene)")
+    try:
+        with zipfile.ZipFile(p) as z:
+            doc = json.loads(z.read("scene.json"))
+    except (zipfile.BadZipFile, KeyError, ValueError, OSError):
+        raise SceneError(f"{p}: corrupt scene file (no readable scene.json); start a new scene") from None
+    _check_header(doc, p)
+    out = []
+    for entry in doc.get("models") or []:
+        if isinstance(entry, dict) and isinstance(entry.get("path"), str):
+            mp = Path(entry["path"])
+            out.append({**entry, "path": str(mp if mp.is_absolute() else (p.parent / mp).resolve())})
+    return out
+
+
 def _check_header(doc, p: Path) -> None:
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise SceneError(f"{p}: not an arapp scene file (format {doc.get('format') if isinstance(doc, dict) else None!r}); "
