@@ -300,27 +300,34 @@ def test_gui_tracks_against_a_scene_without_the_marker_and_saves_it_on_request(q
     """`arapp gui --scene` as run_gui does it: the scene opened, then the source; the first poses come from
     the map (no marker on the desk) where ground truth puts the camera; File > Save scene writes the file
     (history grows by one) and the last scene is remembered for File > Reopen last scene."""
-    import shutil
-
     from arapp import user_config
     from tracking.poses import read_tum
     from tracking.synth.revisits import revisit_folder
 
     w = threads_window
     rec = revisit_folder("test_scene_revisit_1_bare", ROOT / "build" / "synth")
-    scene = shutil.copy(saved_desk, tmp_path / "desk.arscene")
+    model = ROOT / "models" / "vase.json"
+    placed = {"size_mm": 37.0, "offset": [5.0, -3.0, 0.0], "rotation_deg": [0.0, 0.0, 20.0]}
+    first = read_scene(saved_desk)
+    scene = write_scene(tmp_path / "desk.arscene", SceneFile(first.camera, first.anchors,
+                                                             [{"path": str(model), "placement": placed}], first.map))
     w.session.scenes.open(str(scene))
     w.open_source(str(rec))
     qtbot.waitUntil(lambda: w.last_shown is not None and w.last_shown.result.world_from_camera is not None,
                     timeout=60_000)
     res = w.last_shown.result
     assert res.state == "slam" and res.markers == 0
+    qtbot.waitUntil(lambda: w.session.placement is not None and w.session.placement.size_mm == 37.0, timeout=30_000)
+    assert Path(w.session.model_path) == model
+    assert w.session.placement.offset == (5.0, -3.0, 0.0) and w.session.placement.rotation_deg == (0.0, 0.0, 20.0)
     gt_t, gt = read_tum(rec / "groundtruth.tum")
     truth = gt[int(np.argmin(np.abs(gt_t - res.t)))]
     assert np.linalg.norm(res.world_from_camera[:3, 3] - truth[:3, 3]) < 0.01
     out = tmp_path / "saved.arscene"
     w.session.scenes.save(str(out))
     qtbot.waitUntil(out.is_file, timeout=30_000)
-    assert len(read_scene(out).history) == 2
+    saved = read_scene(out)
+    assert len(saved.history) == 2
+    assert saved.models[0]["path"] == str(model) and saved.models[0]["placement"]["size_mm"] == 37.0
     assert user_config.recall("last_scene") == str(out.resolve())
     assert w.session.scenes.last() == str(out.resolve())

@@ -38,9 +38,18 @@ class SceneKeeper:
         user_config.remember(LAST_KEY, self.path)
         self.session.send(LoadScene(self.path))
         if models and Path(models[0]["path"]).is_file():
-            self.session.open_model(models[0]["path"])
-            if models[0].get("placement"):
-                self.session.set_placement(Placement.from_any(models[0]["placement"], self.session.placement))
+            entry = models[0]
+            if entry.get("placement"):
+                events = self.session.events
+
+                def placed(model, path, placement):
+                    # the model loads in a worker and arrives at its own placement: the scene's replaces it
+                    if path == entry["path"]:
+                        events.model_loaded.disconnect(placed)
+                        self.session.set_placement(Placement.from_any(entry["placement"], placement))
+
+                events.model_loaded.connect(placed)
+            self.session.open_model(entry["path"])
         self.session.status(f"Scene {Path(path).name}: relocalising against its map", 5000)
 
     def engine_started(self) -> None:
