@@ -331,3 +331,29 @@ def test_gui_tracks_against_a_scene_without_the_marker_and_saves_it_on_request(q
     assert saved.models[0]["path"] == str(model) and saved.models[0]["placement"]["size_mm"] == 37.0
     assert user_config.recall("last_scene") == str(out.resolve())
     assert w.session.scenes.last() == str(out.resolve())
+
+
+def test_replay_saves_a_scene_then_starts_from_it_and_refuses_a_bad_one_in_one_line(saved_desk, tmp_path, capsys):
+    """`arapp replay --save-scene` writes the scene with the model and placement; `--scene` starts from it
+    (report.json says how the first pose came); a corrupt scene file: one line, exit 2, no --out, file kept."""
+    from arapp.cli import main
+    from tracking.synth.revisits import revisit_folder
+
+    rec = revisit_folder("test_scene_revisit_0_bare", ROOT / "build" / "synth")
+    first = read_scene(saved_desk)
+    scene = write_scene(tmp_path / "desk.arscene", SceneFile(first.camera, first.anchors, [
+        {"path": str(ROOT / "models" / "vase.json"), "placement": {"size_mm": 33.0}}], first.map))
+    out = tmp_path / "out"
+    assert main(["replay", str(rec), "--scene", str(scene), "--save-scene", str(tmp_path / "after.arscene"),
+                 "--out", str(out), "--no-video", "--frames", "8"]) == 0
+    report = json.loads((out / "report.json").read_text())["scene"]
+    assert report["first_pose_s"] == 0.0 and report["first_pose_state"] == "slam"
+    after = read_scene(tmp_path / "after.arscene")
+    assert after.models[0]["placement"] == {"size_mm": 33.0} and len(after.history) == 2
+    assert "saved scene" in capsys.readouterr().out
+    bad = tmp_path / "bad.arscene"
+    bad.write_bytes(b"PK\x03\x04 truncated")
+    assert main(["replay", str(rec), "--scene", str(bad), "--out", str(tmp_path / "o2"), "--no-video"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "corrupt scene file" in err[0] and "start a new scene" in err[0]
+    assert not (tmp_path / "o2").exists() and bad.read_bytes() == b"PK\x03\x04 truncated"
