@@ -196,8 +196,9 @@ if __name__ == "__main__":
     ap.add_argument("--set", default="tune_scene")
     ap.add_argument("--revisits", type=int, default=3)
     ap.add_argument("--json", help="write every revisit's figures here")
+    ap.add_argument("--variants", nargs="*", help="only these revisit variants (tracking.synth.revisits.VARIANTS)")
     a = ap.parse_args()
-    facts, rows = measure(a.set, a.revisits)
+    facts, rows = measure(a.set, a.revisits, a.variants)
     for r in rows:
         print(json.dumps(r, default=float))
     print(table(facts, rows))

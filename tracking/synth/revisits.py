@@ -19,7 +19,9 @@ from pathlib import Path
 import numpy as np
 
 MILD_DIST = [-0.08, 0.04, 0.0005, -0.0005, 0.0]
-VARIANTS = ("path", "evening", "bare", "bare_evening")   # bare: the marker removed
+# bare: the marker removed; wide: from views beyond the mapped ones (azimuth up to 20 degrees past the first
+# session's sweep, nearer or farther), the marker removed
+VARIANTS = ("path", "evening", "bare", "bare_evening", "bare_wide")
 
 # per set: scene seed base, desk seed, marker id, marker length (m)
 SETS = {
@@ -64,10 +66,16 @@ def revisit_scene(set_name: str, index: int, variant: str) -> dict:
     if variant not in VARIANTS:
         raise ValueError(f"revisit variant must be one of {', '.join(VARIANTS)}, got {variant!r}")
     s = SETS[set_name]
-    seed = s["seed"] + 10 + 4 * index + VARIANTS.index(variant)
+    # (the first four variants' seeds interleave; bare_wide, added later, has a range of its own)
+    seed = s["seed"] + (10 + 4 * index + VARIANTS.index(variant) if variant != "bare_wide" else 70 + index)
     rng = np.random.default_rng(seed)
-    az0 = rng.uniform(-125, -60)
-    el0, d0 = rng.uniform(50, 60), rng.uniform(0.40, 0.48)
+    if variant == "bare_wide":
+        side = rng.choice([-1.0, 1.0])
+        az0 = float(-91.5 + side * rng.uniform(45, 63))   # the sweep covers -135..-48: 0-20 degrees past its ends
+        el0, d0 = rng.uniform(42, 66), rng.uniform(0.34, 0.58)
+    else:
+        az0 = rng.uniform(-125, -60)
+        el0, d0 = rng.uniform(50, 60), rng.uniform(0.40, 0.48)
     az1 = az0 + rng.uniform(-12, 12)
     t0 = rng.uniform(-0.03, 0.03, 2)
     t1 = t0 + rng.uniform(-0.02, 0.02, 2)
