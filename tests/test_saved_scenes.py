@@ -357,3 +357,29 @@ def test_replay_saves_a_scene_then_starts_from_it_and_refuses_a_bad_one_in_one_l
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "corrupt scene file" in err[0] and "start a new scene" in err[0]
     assert not (tmp_path / "o2").exists() and bad.read_bytes() == b"PK\x03\x04 truncated"
+
+
+def test_revisits_share_the_desk_and_world_and_bare_ones_have_no_marker():
+    """OpenCV's own detector finds the marker on a revisit with it and nothing on one without; every
+    session of a set names the same anchor (the same world frame) and desk; sets use seeds of their own."""
+    import cv2
+
+    from scenes import load_recording
+    from tracking.synth import scene_from_arg
+    from tracking.synth.revisits import SETS, revisit_folder
+
+    det = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
+    found = {}
+    for name in ("test_scene_revisit_0_evening", "test_scene_revisit_0_bare"):
+        frames, _ = load_recording(revisit_folder(name, ROOT / "build" / "synth"), slice(0, 1))
+        _, ids, _ = det.detectMarkers(cv2.cvtColor(frames[0][1], cv2.COLOR_BGR2GRAY))
+        found[name] = [] if ids is None else ids.ravel().tolist()
+    assert found == {"test_scene_revisit_0_evening": [21], "test_scene_revisit_0_bare": []}
+    base = scene_from_arg("test_scene_map")
+    for name in ("test_scene_revisit_3_bare_wide", "test_scene_revisit_2_path"):
+        s = scene_from_arg(name)
+        assert s.anchor_blocks == base.anchor_blocks and s.desk_seed == base.desk_seed
+        assert s.desk_size == base.desk_size and s.seed != base.seed
+    assert scene_from_arg("test_scene_revisit_1_bare").anchors_shown is False
+    tune = {SETS["tune_scene"][k] for k in ("seed", "desk")}
+    assert not tune & {SETS["test_scene"][k] for k in ("seed", "desk")}
