@@ -76,6 +76,8 @@ class Pipeline:
         self.color = None
         self.world_from_model = np.eye(4)
         self.toolpaths = None  # (line_sets, world_from_bed) set by set_toolpaths
+        # fn(image, t, world_from_camera, state) after each tracked frame (a saved scene's marker check)
+        self.observers: list = []
         if model is not None:
             self.set_model(model, placement)
 
@@ -141,6 +143,8 @@ class Pipeline:
     def process(self, image: np.ndarray, t: float, index: int = 0) -> FrameResult:
         """Track one BGR frame taken at time t (seconds) and, when drawing, composite the overlay."""
         res = self.tracker.process(image, t)
+        for fn in list(self.observers):
+            fn(image, t, res.world_from_camera, res.state)
         t1 = time.perf_counter()
         out = self.draw_overlay(image, res.world_from_camera) if self.draw else image
         t2 = time.perf_counter()

@@ -44,7 +44,7 @@ class SceneRun:
     first_pose_s: float | None = None
     first_pose_state: str | None = None
     check: dict | None = None
-    _checks_left: int = CHECK_FRAMES
+    checks_left: int = CHECK_FRAMES
     notes: list[str] = field(default_factory=list)
 
     @classmethod
@@ -72,8 +72,8 @@ class SceneRun:
         if world_from_camera is not None and self.first_pose_s is None:
             self.first_pose_s, self.first_pose_state = t - self._t0, state
         if (self._frozen is not None and self.check is None and state == "marker" and world_from_camera is not None
-                and self._checks_left > 0):
-            self._checks_left -= 1
+                and self.checks_left > 0):
+            self.checks_left -= 1
             gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
             feats = self.tracker.extractor.extract(gray)
             pose, inliers = relocalise(self._frozen, feats, self.camera.K)

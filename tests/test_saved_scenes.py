@@ -383,3 +383,23 @@ def test_revisits_share_the_desk_and_world_and_bare_ones_have_no_marker():
     assert scene_from_arg("test_scene_revisit_1_bare").anchors_shown is False
     tune = {SETS["tune_scene"][k] for k in ("seed", "desk")}
     assert not tune & {SETS["test_scene"][k] for k in ("seed", "desk")}
+
+
+def test_gui_says_when_the_marker_and_the_saved_scene_disagree(qtbot, threads_window, saved_desk, tmp_path):
+    """A scene whose map sits 3 cm off the marker (the marker moved since): the window shows it, once."""
+    from tracking.synth.revisits import revisit_folder
+
+    scene = read_scene(saved_desk)
+    arrays = map_to_arrays(scene.map)
+    arrays["pt_xyz"] = arrays["pt_xyz"] + [0.0, 0.03, 0.0]
+    arrays["kf_pose"][:, 1, 3] += 0.03
+    moved = write_scene(tmp_path / "moved.arscene", SceneFile(scene.camera, scene.anchors, [],
+                                                              map_from_arrays(arrays)))
+    w = threads_window
+    w.session.scenes.open(str(moved))
+    w.open_source(str(revisit_folder("test_scene_revisit_0_evening", ROOT / "build" / "synth")))
+    qtbot.waitUntil(lambda: any("disagree" in t for t, _ in w.session.errors), timeout=60_000)
+    (title, message), = [e for e in w.session.errors if "disagree" in e[0]]
+    assert "cm" in message and "moved" in message
+    cm = float(message.split(" by ")[1].split(" cm")[0])
+    assert abs(cm - 3.0) < 0.6

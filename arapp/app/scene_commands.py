@@ -32,6 +32,17 @@ class LoadScene:
             engine.state["scene"] = {"loaded": self.path, "keyframes": s["loaded_keyframes"],
                                      "points": s["loaded_points"]}
 
+            def check(image, t, pose, state):
+                # the first frames the marker gives the pose on: does the saved map agree with it?
+                run.observe(image, t, pose, state)
+                if run.check is not None or run.checks_left == 0:
+                    pipe.observers.remove(check)
+                    engine.state["scene"] = {**engine.state["scene"], "marker_vs_map": run.check}
+                    if run.notes:
+                        engine.events.error.emit("The marker and the saved scene disagree", run.notes[-1])
+
+            pipe.observers.append(check)
+
         engine.submit(load)
 
 
