@@ -114,6 +114,25 @@ def run_revisit(scene_path: Path | None, name: str) -> dict:
     return out
 
 
+def chain(scene_path: Path, names: list[str]) -> list[tuple[int, int]]:
+    """Each revisit in turn extends the scene file (loaded, tracked, saved over it): (keyframes, bytes) after
+    each save, to show the file's growth is bounded (keyframe culling)."""
+    from arapp.scene_session import SceneRun
+    from tracking.tracker import Tracker
+
+    out = []
+    for name in names:
+        frames, session = frames_of(recording(name))
+        with Tracker(session.camera, session.anchors, slam=True) as tr:
+            run = SceneRun.start(tr, session.camera, [a.to_dict() for a in session.anchors], load=scene_path)
+            for t, img, _ in frames:
+                tr.process(img, t)
+                tr.catch_up()
+            run.save(scene_path)
+            out.append((len(tr.map.keyframes), scene_path.stat().st_size))
+    return out
+
+
 def measure(set_name: str, revisits: int, variants=None) -> tuple[dict, list[dict]]:
     from tracking.synth.revisits import VARIANTS
 
@@ -121,6 +140,7 @@ def measure(set_name: str, revisits: int, variants=None) -> tuple[dict, list[dic
         scene_path, facts = make_scene(set_name, Path(tmp) / "desk.arscene")
         rows = [run_revisit(scene_path, f"{set_name}_revisit_{i}_{v}")
                 for i in range(revisits) for v in (variants or VARIANTS)]
+        facts["chain"] = chain(scene_path, [r["name"] for r in rows if r["name"].split("_", 4)[-1] != "bare_wide"])
     # the baseline: the revisits without the marker, started without the scene file
     base = [run_revisit(None, r["name"]) for r in rows if "bare" in r["name"]]
     facts["without_scene"] = {"revisits": len(base), "frames": sum(b["frames"] for b in base),
@@ -161,6 +181,10 @@ def table(facts: dict, rows: list[dict]) -> str:
     file_line = (f"Scene file: {facts['bytes'] / 1e6:.2f} MB for {facts['keyframes']} keyframes and {facts['points']} "
                  f"map points, {facts['bytes'] / max(facts['keyframes'], 1) / 1e3:.0f} kB per keyframe; saved in "
                  f"{facts['save_s']:.2f} s, loaded in {np.median([r['load_s'] for r in rows]):.2f} s (median).")
+    ch = facts.get("chain")
+    if ch:
+        file_line += (f" Extended by {len(ch)} revisits in turn (each loads the file, tracks, saves over it): "
+                      f"{', '.join(str(k) for k, _ in ch)} keyframes, {ch[-1][1] / 1e6:.2f} MB at the end.")
     ws = facts.get("without_scene")
     if ws and ws["revisits"]:
         file_line += (f" Without the scene file the {ws['revisits']} revisits without the marker track "
