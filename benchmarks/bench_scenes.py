@@ -207,7 +207,8 @@ def run(quick: bool = False) -> str:
             "file; each revisit (1.2 s, its own path and seed, `tracking.synth.revisits`) starts a fresh tracker "
             "from that file. `path`: another path; `evening`: another time of day (darker fixed exposure, "
             "warmer white balance, noisier); `bare`: the marker removed from the desk, only the map can place "
-            "the camera. Errors against ground truth in the first session's world frame. Goals: >= 95 % "
+            "the camera; `bare_wide`: no marker, from views up to 20 deg past the first session's sweep, nearer "
+            "or farther. Errors against ground truth in the first session's world frame. Goals: >= 95 % "
             "relocalise within 1 s, <= 10 mm, <= 1 deg. Test set only (seeds 700+); tuned on `tune_scene` "
             "(seeds 600+). Measured on a shared, loaded machine (2 cores).\n\n" + table(facts, rows) + "\n")
 
