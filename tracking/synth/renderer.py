@@ -169,11 +169,12 @@ class DeskRenderer:
         # Soft desk lamp: brighter near one side, in desk coordinates so it moves with the scene:
         # 0.88 + 0.2 exp(-|(x, y) - lamp|^2 / 0.5), the offset scaled by 1/sqrt(0.5) by one more homography.
         k = 1.0 / np.sqrt(0.5)
-        to_lamp = np.array([[k, 0.0, -k * (self.centre[0] + 0.3)], [0.0, k, -k * (self.centre[1] + 0.2)],
+        lx, ly, strength, ambient = self.scene.lamp
+        to_lamp = np.array([[k, 0.0, -k * (self.centre[0] + lx)], [0.0, k, -k * (self.centre[1] + ly)],
                             [0.0, 0.0, 1.0]])
         d = _apply_homography(rays, to_lamp @ Hd)
         r2 = cv2.transform(d * d, np.ones((1, 2)))
-        lamp = cv2.exp(-r2) * np.float32(0.2) + np.float32(0.88)
+        lamp = cv2.exp(-r2) * np.float32(strength) + np.float32(ambient)
         if not all_ok:
             lamp[~ok] = 1.0
         img *= lamp[..., None]
@@ -246,7 +247,8 @@ class DeskRenderer:
             sub[paper & ~ink] = PAPER_BGR
             sub[ink] = INK_BGR
         # Soft desk lamp: brighter near one side, in desk coordinates so it moves with the scene.
-        lamp = 0.88 + 0.2 * np.exp(-((x - self.centre[0] - 0.3) ** 2 + (y - self.centre[1] - 0.2) ** 2) / 0.5)
+        lx, ly, strength, ambient = self.scene.lamp
+        lamp = ambient + strength * np.exp(-((x - self.centre[0] - lx) ** 2 + (y - self.centre[1] - ly) ** 2) / 0.5)
         img *= np.where(valid, lamp, 1.0)[..., None]
         return img
 

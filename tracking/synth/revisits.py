@@ -86,11 +86,13 @@ def revisit_scene(set_name: str, index: int, variant: str) -> dict:
          "target": [*map(float, t1), 0.0]}],
         "shake": {"pos_mm": 1.0, "rot_deg": 0.2, "freq_hz": 1.5}}
     if "evening" in variant:
-        # another time of day: a dimmer, warmer light the camera's fixed exposure no longer matches,
-        # with the noise of a darker image
+        # another time of day: the lamp on the other side of the desk and the room dimmer (a brightness
+        # gradient across the desk the first session did not have), a warmer white balance, a fixed
+        # exposure that no longer matches, and the noise of a darker image
+        scene["desk"]["lamp"] = {"at": [-0.35, 0.3], "strength": 0.5, "ambient": 0.6}
         scene["effects"] = {"noise": 1.2, "sensor": {"full_well": 1500, "read_noise": 2.5}, "vignette": 0.3,
-                            "auto_exposure": {"target": 60, "speed": 0.05, "initial_gain": 0.55,
-                                              "min_gain": 0.5, "max_gain": 0.6},
+                            "auto_exposure": {"target": 60, "speed": 0.05, "initial_gain": 0.8,
+                                              "min_gain": 0.75, "max_gain": 0.85},
                             "white_balance": {"amplitude": 0.12, "period": 40.0, "phase": 1.2}}
     if "bare" in variant:
         scene["desk"]["anchors_shown"] = False
