@@ -184,22 +184,29 @@ def adopt(dst: Map, src: Map) -> None:
         dst._cache_version = -1
 
 
-def cull_keyframes(m: Map, max_keyframes: int = 120, redundancy: float = 0.9, min_views: int = 3) -> int:
+def cull_keyframes(m: Map, max_keyframes: int = 120, redundancy: float = 0.9, min_views: int = 3,
+                   keep_anchor_kfs: int = 4) -> int:
     """Remove redundant keyframes: those whose map points (at least `redundancy` of them) are each seen
     by `min_views` other keyframes (ORB-SLAM's rule), most redundant first; then, while more than
-    `max_keyframes` remain, the most redundant of the rest. Keyframes that saw anchor corners go last
-    (they tie the map to the markers). Points left without observations go too. Returns keyframes removed."""
+    `max_keyframes` remain, the most redundant of the rest. The last `keep_anchor_kfs` keyframes that saw
+    anchor corners always stay (they tie the map to the markers). Points left without observations go too.
+    Returns keyframes removed."""
     removed = 0
     with m.lock:
         while len(m.keyframes) > 2:
             score = {}
+            anchored = sum(kf.from_anchors for kf in m.keyframes.values())
             for kf in m.keyframes.values():
+                if kf.from_anchors and anchored <= keep_anchor_kfs:
+                    continue
                 pids = [int(p) for p in kf.point_ids if p >= 0 and int(p) in m.points]
                 if not pids:
                     score[kf.id] = 1.0
                     continue
                 seen = sum(1 for p in pids if len(m.points[p].obs) - 1 >= min_views)
-                score[kf.id] = seen / len(pids) - (0.5 if kf.from_anchors else 0.0)
+                score[kf.id] = seen / len(pids)
+            if not score:
+                break
             kid = max(score, key=lambda k: (score[k], -k))
             if score[kid] < redundancy and len(m.keyframes) <= max_keyframes:
                 break
