@@ -82,6 +82,8 @@ class Pipeline:
         self.occlusion: str | None = None  # "off", "depth", "plane"; None: depth when a frame has depth
         self._plane = None  # arapp.render.occlusion.PlaneDepth, made on first use
         self.set_occlusion(occlusion)
+        # fn(image, t, world_from_camera, state) after each tracked frame (a saved scene's marker check)
+        self.observers: list = []
         if model is not None:
             self.set_model(model, placement)
 
@@ -169,6 +171,8 @@ class Pipeline:
         """Track one BGR frame taken at time t (seconds) and, when drawing, composite the overlay.
         depth: the frame's depth (float32 metres on its pixels, 0 = none) for depth occlusion."""
         res = self.tracker.process(image, t)
+        for fn in list(self.observers):
+            fn(image, t, res.world_from_camera, res.state)
         t1 = time.perf_counter()
         out = self.draw_overlay(image, res.world_from_camera, depth) if self.draw else image
         t2 = time.perf_counter()

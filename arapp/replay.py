@@ -40,6 +40,8 @@ class ReplayOptions:
     calibration: str | None = None  # calibration file for a plain video (default: the estimated camera)
     anchors: str | None = None  # anchors JSON (default: a recording's own, else the recorder's default)
     occlusion: str | None = None  # "off", "depth", "plane"; None: depth when the recording has depth, else off
+    scene: str | None = None  # scene file to start from (arapp.exchange.scene): its map, and its model if none given
+    save_scene: str | None = None  # scene file to write at the end (the map as the run left it)
 
 
 def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | None = None,
@@ -68,6 +70,14 @@ def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | 
     pipeline = Pipeline(camera, anchors, model=model, placement=options.placement, mode=options.mode,
                         slam=options.slam, draw=options.video, tracker_params=options.tracker_params,
                         occlusion=options.occlusion)
+    scene_run = None
+    if options.scene or options.save_scene:
+        try:
+            scene_run = _start_scene(pipeline, camera, anchors, options, say)
+        except BaseException:
+            pipeline.close()
+            source.close()
+            raise
     if options.toolpaths:
         line_sets, world_from_bed = toolpath_overlay(options.toolpaths, options.printer, anchors, options.layer)
         pipeline.set_toolpaths(line_sets, world_from_bed)
@@ -93,6 +103,8 @@ def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | 
                     interrupted = True
                     break
                 res = pipeline.process(frame.image, frame.t, frame.index, depth=getattr(frame, "depth", None))
+                if scene_run is not None:
+                    scene_run.observe(frame.image, frame.t, res.world_from_camera, res.state)
                 if res.world_from_camera is not None:
                     poses_f.write(tum_line(frame.t, res.world_from_camera))
                     poses_f.flush()
@@ -114,13 +126,48 @@ def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | 
         finally:
             if writer is not None:
                 writer.release()
+            saved = _save_scene(scene_run, pipeline, options, say) if scene_run is not None else None
             pipeline.close()
             error = getattr(source, "error", None)
             source.close()
     wall = time.perf_counter() - t_start
     report = _report(recording, out, n, states, wall, interrupted, error, times[-1] if times else None)
+    if scene_run is not None:
+        report["scene"] = {**scene_run.summary(), **(saved or {})}
+        for line in scene_run.notes if say is not None else ():
+            say(line)
     (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
     return report
+
+
+def _start_scene(pipeline: Pipeline, camera, anchors, options: ReplayOptions, say):
+    """The run's SceneRun: `options.scene` loaded into the tracker (SceneError when unusable), and its first
+    model shown when the replay names none."""
+    from arapp.scene_session import SceneRun
+
+    run = SceneRun.start(pipeline.tracker, camera, [a.to_dict() for a in anchors], load=options.scene)
+    if options.scene and say is not None:
+        s = run.summary()
+        say(f"scene {options.scene}: {s['loaded_keyframes']} keyframes, {s['loaded_points']} map points")
+    if options.scene and options.model is None and run.models:
+        entry = run.models[0]
+        pipeline.set_model(load_display_model(entry["path"]), entry.get("placement") or None)
+        options.model, options.placement = entry["path"], entry.get("placement") or None
+    return run
+
+
+def _save_scene(run, pipeline: Pipeline, options: ReplayOptions, say) -> dict | None:
+    """Write `options.save_scene` (the map as the run left it, the model and placement shown)."""
+    if not options.save_scene:
+        return None
+    models = [{"path": str(options.model), "placement": dict(options.placement or {})}] if options.model else []
+    path = run.save(options.save_scene, models)
+    m = pipeline.tracker.map
+    if say is not None:
+        say(f"saved scene {path}: {len(m.keyframes)} keyframes, {len(m.points)} map points, "
+            f"{path.stat().st_size / 1e6:.2f} MB")
+    return {"saved": str(path), "saved_keyframes": len(m.keyframes), "saved_points": len(m.points),
+            "saved_bytes": path.stat().st_size}
 
 
 def _open_writer(path: Path, fps: float, width: int, height: int):

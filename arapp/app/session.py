@@ -36,6 +36,7 @@ from arapp.app.sourcespec import display_name
 from arapp.exchange.meshes import is_mesh_path
 from arapp.pipeline import MODES, OCCLUSION_MODES, load_display_model
 from arapp.placement import Placement, dragged_placement, placement_point_at_pixel
+from arapp.app.scene_keeper import SceneKeeper
 from tracking.anchors.defaults import DEFAULT_DICTIONARY
 from tracking.anchors.discover import Suggestion
 from tracking.session import parse_anchors
@@ -152,6 +153,7 @@ class Session:
         self.history = History(self)  # undo / redo of control-point edits and placement
         self.first_picture = FirstPictureWatch()  # a source silent for its timeout_s is given up (`tick`)
         self.anchor_offer: dict | None = None  # what anchor discovery found in the open source, unanswered
+        self.scenes = SceneKeeper(self)  # the saved scene tracked against (arapp.app.scene_keeper)
 
     # -- errors and messages -------------------------------------------------------------
     def report(self, title: str, message: str) -> None:
@@ -232,6 +234,7 @@ class Session:
             engine.send(cmd.Highlight(self.highlight))
         if self.toolpaths_spec is not None:
             engine.send(cmd.ShowToolpaths(self.toolpaths_spec, self.toolpaths_gen))
+        self.scenes.engine_started()
         self.events.playing_changed.emit(True)
 
     @staticmethod

@@ -31,6 +31,11 @@ def add_arguments(parser):
     parser.add_argument("--printer", help="printer profile JSON (for --toolpaths)")
     parser.add_argument("--toolpaths", help="G-code whose toolpaths are drawn on the printer bed")
     parser.add_argument("--layer", type=int, help="with --toolpaths: highlight this layer, dim those below")
+    parser.add_argument("--scene", metavar="S.arscene", help="start from this saved scene: relocalise against its "
+                        "map (the model shows where it was left, even with the marker removed) and show its model "
+                        "unless --model is given (docs/scene-format.md)")
+    parser.add_argument("--save-scene", metavar="S.arscene", help="save the scene at the end: the map (extended, "
+                        "when --scene was loaded), anchors, model and placement; may be the --scene file")
 
 
 def check_args(args) -> None:
@@ -49,6 +54,10 @@ def run(args):
     from arapp.replay import ReplayOptions, replay, terminal_progress
 
     check_args(args)
+    if (args.scene or args.save_scene) and args.no_slam:
+        raise ValueError("--scene and --save-scene need the keypoint map: drop --no-slam")
+    if args.save_scene and not args.save_scene.endswith(".arscene"):
+        raise ValueError(f"--save-scene {args.save_scene}: scene files end in .arscene")
     if args.size is not None:
         check_size_mm(args.size, "--size")
     placement = None
@@ -58,7 +67,8 @@ def run(args):
                          slam=not args.no_slam, max_frames=args.frames, printer=args.printer,
                          toolpaths=args.toolpaths, layer=args.layer,
                          tracker_params={"marker_every": args.marker_every} if not args.no_slam else {},
-                         calibration=args.calibration, anchors=args.anchors, occlusion=args.occlusion)
+                         calibration=args.calibration, anchors=args.anchors, occlusion=args.occlusion,
+                         scene=args.scene, save_scene=args.save_scene)
     # Written to a temporary folder moved into place at the end: a failure leaves no (empty) --out behind.
     with staged_folder(args.out) as tmp:
         report = replay(args.recording, tmp, opts, progress=terminal_progress(sys.stderr),  # stderr as now

@@ -29,6 +29,10 @@ def run(args):
                     else "tuning")
             print(f"{name:18s} {kind} {cam['width']}x{cam['height']} "
                   f"{p['duration']:.1f} s  {', '.join(a['kind'] for a in p['anchors'])}  {p['trajectory']['kind']}")
+        from tracking.synth.revisits import SETS, VARIANTS
+
+        print(f"scene revisits (tracking.synth.revisits): SET_map, SET_revisit_N_VARIANT; sets {', '.join(SETS)} "
+              f"(tune_scene: tuning, test_scene: test); variants {', '.join(VARIANTS)}")
         return 0
     if not args.out:
         raise ValueError("--out is required: the recording folder to write (e.g. recordings/my_scene)")

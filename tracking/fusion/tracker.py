@@ -70,6 +70,7 @@ from tracking.slam.features import FeatureExtractor, Features
 from tracking.slam.flow import relift
 from tracking.slam.frame_pose import MotionModel
 from tracking.slam.map import Map
+from tracking.slam.map_io import adopt
 from tracking.slam.mapping import LocalMapper
 
 
@@ -143,6 +144,17 @@ class Tracker:
 
     def __exit__(self, *exc):
         self.close()
+
+    def load_map(self, saved: Map) -> None:
+        """Start from a saved map (a scene file, tracking.slam.map_io): forget the motion, so the next
+        frames relocalise against every saved keyframe; new keyframes extend it."""
+        self.reset()
+        adopt(self.map, saved)
+
+    def export_map(self) -> Map:
+        """The map as it stands once queued keyframes are mapped (to save in a scene file)."""
+        self.wait_mapping()
+        return self.map
 
     def wait_mapping(self) -> None:
         """Block until queued keyframes are mapped (offline replay, tests)."""
