@@ -173,24 +173,23 @@ def gui_run(recording: Path, seconds: float, speed: float = 1.0, engine: str = "
     return out
 
 
-STAGES = ("wait", "track", "render", "handover", "paint")
+STAGES = ("wait", "track", "render", "display", "handover", "paint")
 
 
 def frame_stages(shown, painted_at: float) -> dict:
-    """One painted frame's latency split into stages (ms): wait (capture -> processing start, with the
-    scaling to the view), track, render, handover (processed -> taken by the UI thread; only where the
-    engine marks it: the child-process engine's `stages`) and paint (taken -> painted; where there is no
-    hand-over mark, processed -> painted)."""
+    """One painted frame's latency split into stages (ms) that add up to it: wait (capture -> processing
+    start), track, render (the rest of the processing: the frame's copy, the marker marks, the model drawn
+    and composited), display (scaled to the view, converted to 32 bits), handover (processed -> taken by the
+    UI thread: the child process's pipe and shared memory, or the threads' slot, and the UI event) and
+    paint (taken -> painted)."""
     r = shown.result
-    marks = getattr(shown, "stages", None) or {}
-    out = {"wait": (shown.processed_at - shown.captured_at) * 1e3 - r.ms_track - r.ms_render,
-           "track": r.ms_track, "render": r.ms_render}
-    if "taken" in marks:
-        out["handover"] = (marks["taken"] - shown.processed_at) * 1e3
-        out["paint"] = (painted_at - marks["taken"]) * 1e3
-    else:
-        out["paint"] = (painted_at - shown.processed_at) * 1e3
-    return out
+    marks = shown.stages
+    start = marks.get("start", shown.captured_at)
+    composited = marks.get("composited", shown.processed_at)
+    taken = marks.get("taken", shown.processed_at)
+    return {"wait": (start - shown.captured_at) * 1e3, "track": r.ms_track,
+            "render": (composited - start) * 1e3 - r.ms_track, "display": (shown.processed_at - composited) * 1e3,
+            "handover": (taken - shown.processed_at) * 1e3, "paint": (painted_at - taken) * 1e3}
 
 
 def stage_medians(rows: list[dict]) -> dict:
@@ -227,17 +226,20 @@ def naive_gui_run(recording: Path, seconds: float) -> dict:
         frame = next(it)
         captured = time.perf_counter()
         res = pipe.process(frame.image, frame.t, frame.index)
+        processed = time.perf_counter()
         track_ms.append(res.ms_track)
-        pending["t"], pending["res"] = captured, res
-        view.set_image(bgr_qimage(res.image))  # paints at once (VideoView.set_image)
+        image = bgr_qimage(res.image)
+        pending["t"], pending["res"], pending["marks"] = captured, res, (processed, time.perf_counter())
+        view.set_image(image)  # paints at once (VideoView.set_image)
 
     def on_paint(when):
         if "t" in pending:
-            res = pending["res"]
-            total = (when - pending.pop("t")) * 1e3
-            lat.append(total)
-            stages.append({"wait": 0.0, "track": res.ms_track, "render": res.ms_render,
-                           "paint": total - res.ms_track - res.ms_render})
+            res, captured, (processed, converted) = pending["res"], pending.pop("t"), pending["marks"]
+            lat.append((when - captured) * 1e3)
+            stages.append({"wait": 0.0, "track": res.ms_track,
+                           "render": (processed - captured) * 1e3 - res.ms_track,
+                           "display": (converted - processed) * 1e3, "handover": 0.0,
+                           "paint": (when - converted) * 1e3})
             painted[0] += 1
 
     view.painted.connect(on_paint)
@@ -293,10 +295,12 @@ def run(quick: bool = False) -> str:
         return f"| {name} | {cells} | {ratio(gui[key], naive[key])} | {goal} |"
 
     def stage_rows():
-        names = {"wait": "stage: capture -> processing start (waiting, scaling to the view), median",
-                 "track": "stage: tracking, median", "render": "stage: rendering, median",
+        names = {"wait": "stage: capture -> processing start, median",
+                 "track": "stage: tracking, median",
+                 "render": "stage: rendering (marker marks, model drawn and composited), median",
+                 "display": "stage: display picture (scaled to the view, 32-bit), median",
                  "handover": "stage: hand-over to the UI thread (processed -> taken), median",
-                 "paint": "stage: paint (taken -> painted; no hand-over mark: processed -> painted), median"}
+                 "paint": "stage: paint (taken -> on screen), median"}
         out = []
         for k in STAGES:
             vals = [gui["stages"][k], threads["stages"][k], naive["stages"][k]]

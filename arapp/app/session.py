@@ -136,6 +136,7 @@ class Session:
         self.display_size: tuple[int, int] | None = None
         self.model_gen = 0
         self.highlight: tuple[int, int, int] | None = None  # the control point being edited, ringed
+        self.show_marks = False  # the detected markers outlined on the frames (`set_show_marks`)
         self.toolpaths_spec: dict | None = None  # the print preview asked for (arapp.app.toolpaths.preview_spec)
         self.toolpaths_gen = 0
         self.toolpaths_info: dict | None = None  # what the engine drew
@@ -218,6 +219,8 @@ class Session:
         self.engine = engine
         if self.display_size is not None:
             engine.send(cmd.SetDisplaySize(self.display_size))
+        if self.show_marks:
+            engine.send(cmd.ShowMarks(True))
         self.events.source_opening.emit(name)
         engine.start()
         self.first_picture.start()
@@ -260,6 +263,12 @@ class Session:
             self.engine.stop(wait=wait)
         for e in self.old_engines:
             e.stop(wait=wait / 2)
+
+    def set_show_marks(self, on: bool) -> None:
+        """Outline the markers the tracker detects, with the anchors' axes, on the frames shown (drawn by the
+        engine under the model: arapp.app.overlay_marks), or not."""
+        self.show_marks = bool(on)
+        self.send(cmd.ShowMarks(self.show_marks))
 
     def set_display_size(self, width: int, height: int) -> None:
         self.display_size = (int(width), int(height))
