@@ -76,9 +76,6 @@ class Pipeline:
         self.color = None
         self.world_from_model = np.eye(4)
         self.toolpaths = None  # (line_sets, world_from_bed) set by set_toolpaths
-        # underlay(image, world_from_camera, markers_seen): draws in place on the frame's copy before the
-        # model is composited, so the model covers it as it covers the paper (the live view's marker marks)
-        self.underlay = None
         if model is not None:
             self.set_model(model, placement)
 
@@ -145,8 +142,7 @@ class Pipeline:
         """Track one BGR frame taken at time t (seconds) and, when drawing, composite the overlay."""
         res = self.tracker.process(image, t)
         t1 = time.perf_counter()
-        seen = res.markers if res.state == "marker" else 0
-        out = self.draw_overlay(image, res.world_from_camera, seen) if self.draw else image
+        out = self.draw_overlay(image, res.world_from_camera) if self.draw else image
         t2 = time.perf_counter()
         if self._last_time is not None and t2 > self._last_time:
             inst = 1.0 / (t2 - self._last_time)
@@ -157,10 +153,8 @@ class Pipeline:
         return FrameResult(index, t, res.world_from_camera, res.state, res.markers, res.inliers,
                            float(res.ms), (t2 - t1) * 1e3, out)
 
-    def draw_overlay(self, image: np.ndarray, world_from_camera: np.ndarray | None,
-                     markers_seen: int = 0) -> np.ndarray:
-        """A copy of the BGR `image` with the model (and toolpaths) drawn as seen from `world_from_camera`,
-        over what `underlay` draws (given `markers_seen`, the markers detected in this frame).
+    def draw_overlay(self, image: np.ndarray, world_from_camera: np.ndarray | None) -> np.ndarray:
+        """A copy of the BGR `image` with the model (and toolpaths) drawn as seen from `world_from_camera`.
 
         The drawing half of `process`, without tracking: a paused view redraws
         with new settings through it, and the tracker never sees a frame twice.
@@ -168,8 +162,6 @@ class Pipeline:
         out = image.copy()
         if world_from_camera is None:
             return out
-        if self.underlay is not None:
-            self.underlay(out, world_from_camera, markers_seen)
         camera_from_world = invert(world_from_camera)
         if self.mesh is not None:
             out = self.renderer.draw(out, self.mesh, camera_from_world @ self.world_from_model, mode=self.mode,

@@ -178,8 +178,8 @@ STAGES = ("wait", "track", "render", "display", "handover", "paint")
 
 def frame_stages(shown, painted_at: float) -> dict:
     """One painted frame's latency split into stages (ms) that add up to it: wait (capture -> processing
-    start), track, render (the rest of the processing: the frame's copy, the marker marks, the model drawn
-    and composited), display (scaled to the view, converted to 32 bits), handover (processed -> taken by the
+    start), track, render (the rest of the processing: the frame's copy, the model drawn and composited),
+    display (scaled to the view, converted to 32 bits, the marker marks drawn), handover (processed -> taken by the
     UI thread: the child process's pipe and shared memory, or the threads' slot, and the UI event) and
     paint (taken -> painted)."""
     r = shown.result
@@ -297,8 +297,8 @@ def run(quick: bool = False) -> str:
     def stage_rows():
         names = {"wait": "stage: capture -> processing start, median",
                  "track": "stage: tracking, median",
-                 "render": "stage: rendering (marker marks, model drawn and composited), median",
-                 "display": "stage: display picture (scaled to the view, 32-bit), median",
+                 "render": "stage: rendering (the model drawn and composited), median",
+                 "display": "stage: display picture (scaled to the view, 32-bit, marker marks), median",
                  "handover": "stage: hand-over to the UI thread (processed -> taken), median",
                  "paint": "stage: paint (taken -> on screen), median"}
         out = []

@@ -1,8 +1,8 @@
 """Detected markers outlined with their axes (pytest-qt, offscreen): with View > Show detected markers on,
 the view's pixels along the marker's edges (found by OpenCV's own ArucoDetector on the frame as
 captured) change colour; off, they stay the frame's. The 2-D primitives are checked against
-cv2.projectPoints of the marker's corners at the same pose. The marks are drawn by the engine into the
-frame before the model is composited, so the model covers them."""
+cv2.projectPoints of the marker's corners at the same pose. The engine draws the marks into the picture
+it hands over to the view, under the model, and not into the composite kept for screenshots."""
 
 from __future__ import annotations
 
@@ -80,9 +80,11 @@ def set_marks(qtbot, window, on: bool) -> np.ndarray:
     return grab_rgb(window.view)
 
 
-def test_detected_marker_outlined_when_on_and_not_when_off(qtbot, window, recording):
+@pytest.mark.parametrize("engine", ["threads", "process"])
+def test_detected_marker_outlined_when_on_and_not_when_off(qtbot, window, recording, engine):
     from arapp.app.overlay_marks import marker_marks
 
+    window.engine_kind = engine  # the in-process engine, and the shipped child-process one
     assert window.marker_marks_action.isChecked()  # default on
     window.open_source(str(recording))
     qtbot.waitUntil(lambda: window.session.last_shown is not None
@@ -105,12 +107,17 @@ def test_detected_marker_outlined_when_on_and_not_when_off(qtbot, window, record
     assert np.abs(np.sort(marks.quads[0], 0) - np.sort(ref.reshape(4, 2), 0)).max() < 0.01
 
     pts = to_widget(window, edge_samples(frame), frame.shape)
+    first = grab_rgb(window.view)  # on from the source's first frame
     off = set_marks(qtbot, window, False)
     on = set_marks(qtbot, window, True)
+    marked = window.session.last_shown
+    # only the view's picture has them: the composite kept for screenshots and videos is the frame itself
+    assert np.array_equal(marked.result.image, marked.frame)
     off_again = set_marks(qtbot, window, False)
 
     # on: the outline's colour along every edge; off: the same picture as before
     assert (changed_at(off, on, pts) > 60).mean() >= 0.9
+    assert (changed_at(off, first, pts) > 60).mean() >= 0.9
     assert changed_at(off, off_again, pts).max() <= 2
 
 
@@ -177,3 +184,37 @@ def test_marks_lie_under_the_model(qtbot, window, recording):
     change = changed_at(off, on, pts)
     assert change[under].max() <= 3, change[under]  # the model, not the outline, where it covers the edge
     assert (change[clear] > 60).mean() >= 0.9  # the outline where the paper is seen
+
+
+def test_marks_are_drawn_at_the_views_scale_and_under_the_model_as_the_mode_lets_through():
+    """Headless: a horizontal outline edge across a frame half covered by a 'model' (the composite differs
+    from the frame on the right half). In a picture at half the frame's size the line lands at half the
+    frame position, OUTLINE_PX wide; where the model is, shaded keeps the model's pixels and a see-through
+    mode mixes in `under` of the outline's colour (the rule under_opacity states)."""
+    from arapp.app.overlay_marks import OUTLINE_RGB, MarkerMarks, draw_marks, under_opacity
+
+    frame = np.full((200, 400, 3), 90, np.uint8)
+    composite = frame.copy()
+    composite[:, 200:] = (30, 160, 30)  # the model over the right half
+    marks = MarkerMarks(400, 200, quads=[np.array([[40.0, 100.0], [360.0, 100.0], [360.0, 100.0], [40.0, 100.0]])])
+    cyan_bgra = np.array(OUTLINE_RGB[::-1] + (255,))
+
+    def picture(mode):
+        display = cv2.cvtColor(cv2.resize(composite, (200, 100), interpolation=cv2.INTER_LINEAR),
+                               cv2.COLOR_BGR2BGRA)
+        plain = display.copy()
+        draw_marks(display, marks, composite, frame, under_opacity(mode))
+        return plain, display
+
+    plain, shaded = picture("shaded")
+    row = np.abs(shaded.astype(int) - plain.astype(int)).max(axis=2)
+    assert (row[:, 30:90].max(axis=1) > 100).sum() in (2, 3)  # OUTLINE_PX wide, antialiased
+    assert row[48:52, 30:90].min() > 0 and row[:45].max() == 0 and row[56:].max() == 0  # at y = 100 / 2
+    assert np.abs(shaded[49:51, 30:90].astype(int) - cyan_bgra).max() <= 60
+    assert row[:, 105:170].max() == 0  # under the shaded model: the model's own pixels
+    _, see_through = picture("translucent")
+    u = under_opacity("translucent")
+    assert 0 < u < 1
+    want = plain[49:51, 105:170].astype(float) + u * (shaded[49:51, 30:90].mean(axis=1, keepdims=True)
+                                                       - plain[49:51, 105:170])
+    assert np.abs(see_through[49:51, 105:170].astype(float) - want).max() <= 25

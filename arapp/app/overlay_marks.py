@@ -1,5 +1,5 @@
-"""The marks that show the markers the tracker sees, drawn on the live view's frame: each marker's outline
-and a small RGB axis triad at each anchor's origin. No Qt, no GL.
+"""The marks that show the markers the tracker sees on the live view: each marker's outline and a small
+RGB axis triad at each anchor's origin, drawn into the display picture. No Qt, no GL.
 
 The outlines are the anchors' marker corners (tracking.anchors.model: anchor frame, metres) projected
 with the frame's `world_from_camera` and the source's camera (distortion applied, as cv2.projectPoints),
@@ -7,29 +7,40 @@ so they lie on the markers as the pose puts them: where they sit off the printed
 off. Only markers whose four corners are in front of the camera and inside the frame are outlined, and
 nothing is drawn on a frame where the tracker detected no marker (state "slam" or "lost").
 
-`MarksUnderlay` draws them into the frame in the processing thread before the model is composited
-(`arapp.pipeline.Pipeline.underlay`), so they lie on the paper, under the model: the renderer's own
-picture covers them as much as the display mode's surface covers the paper. Nothing of them is left
-for the UI thread to compute or paint.
+`draw_marks` draws them in the processing thread into the picture scaled to the view, after the
+model was composited, so the UI thread neither computes nor paints them and the composite kept for
+screenshots and videos stays without them. They lie on the paper, under the model: a mark's pixel
+where the renderer drew the model (the composite differs from the frame as captured there: the
+compositor leaves every other pixel bit-exact) shows only as much as the display mode's surface lets
+the paper through (`under_opacity`: nothing when shaded).
 """
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 
+from arapp.render.modes import SURFACE_ALPHA
 from tracking.anchors.model import build_models
 
 # the triad's length in marker sides: plain to see, and short of the next marker on a board
 AXIS_SHARE = 1.0
 MIN_DEPTH_M = 0.01  # points nearer the camera than this (or behind it) are not drawn
-OUTLINE_BGR = (255, 230, 0)  # cyan: stands out on paper, skin and wood alike
-AXIS_BGR = ((40, 40, 255), (40, 220, 40), (255, 110, 60))  # x red, y green, z blue
-OUTLINE_PX, AXIS_PX = 2.0, 3.0  # line widths in display pixels (as painted on screen)
+OUTLINE_RGB = (0, 230, 255)  # cyan: stands out on paper, skin and wood alike
+AXIS_RGB = ((255, 40, 40), (40, 220, 40), (60, 110, 255))  # x red, y green, z blue
+# line widths in display pixels, as cv2's antialiased lines come out: an outline edge is two 1-pixel
+# lines half a pixel either side of it (about 2 px), an axis one line of thickness 2 (about 3 px)
+OUTLINE_PX, AXIS_PX = 2, 3
 SUBPIXEL_BITS = 4  # cv2 drawing with 1/16-pixel positions
-LIMIT_PX = 1e6  # line ends are clipped to this far off the frame (cv2 takes int32 positions)
+LIMIT_PX = 1e6  # line ends are clipped to this far off the picture (cv2 takes int32 positions)
+
+
+def under_opacity(mode: str) -> float:
+    """How much of a mark under the model shows through its surface in display `mode` (0: none)."""
+    return max(0.0, 1.0 - float(SURFACE_ALPHA.get(mode, 1.0)))
 
 
 @dataclass
@@ -52,33 +63,60 @@ class MarkerMarks:
         return out
 
 
-def draw_marks(image: np.ndarray, marks: MarkerMarks, display_scale: float = 1.0) -> None:
-    """Draw `marks` on the BGR `image` (frame pixels) in place, antialiased, with line widths chosen so
-    that they are OUTLINE_PX / AXIS_PX wide once the frame is shown `display_scale` times its size."""
-    s = max(float(display_scale), 1e-3)
-    widths = {-1: max(1, round(OUTLINE_PX / s)), 0: max(1, round(AXIS_PX / s))}
+def _native(rgb: tuple[int, int, int]) -> tuple[int, int, int, int]:
+    """An opaque colour in the display picture's 32-bit order (arapp.app.processor.to_bgra)."""
+    r, g, b = rgb
+    return (b, g, r, 255) if sys.byteorder == "little" else (255, r, g, b)
+
+
+def draw_marks(display: np.ndarray, marks: MarkerMarks, composite: np.ndarray | None = None,
+               frame: np.ndarray | None = None, under: float = 0.0) -> None:
+    """Draw `marks` (frame pixels) into `display` in place: the (h, w, 4) uint8 picture of the frame scaled
+    to the view (its aspect kept), antialiased lines OUTLINE_PX / AXIS_PX display pixels wide.
+
+    composite, frame: the full-size BGR frame with the model drawn and as captured; where they differ
+    (the model), a mark's pixel keeps only `under` of its colour (under_opacity of the display mode).
+    """
+    h, w = display.shape[:2]
+    sx, sy = w / marks.width, h / marks.height
+    lines = marks.lines()
+    if not lines:
+        return
+    # the lines' box in the display (a few pixels wider for line width and antialiasing), clipped
+    ends = np.array([[a, b] for a, b, _ in lines], float).reshape(-1, 2)
+    ends = np.clip((ends + 0.5) * (sx, sy) - 0.5, -LIMIT_PX, LIMIT_PX)
+    if not np.isfinite(ends).all():
+        return
+    x0, y0 = np.maximum(np.floor(ends.min(axis=0)).astype(int) - 4, 0)
+    x1, y1 = np.minimum(np.ceil(ends.max(axis=0)).astype(int) + 5, (w, h))
+    if x1 <= x0 or y1 <= y0:
+        return
+    box = display[y0:y1, x0:x1]
+    before = box.copy()
     one = 1 << SUBPIXEL_BITS
-    for a, b, kind in marks.lines():
-        ab = np.clip(np.array([a, b], float), -LIMIT_PX, LIMIT_PX)  # a triad's end may project far off
-        if not np.isfinite(ab).all():
-            continue
-        pa, pb = (tuple(int(round(v * one)) for v in p) for p in ab)
-        colour = OUTLINE_BGR if kind < 0 else AXIS_BGR[kind]
-        cv2.line(image, pa, pb, colour, widths[min(kind, 0)], cv2.LINE_AA, SUBPIXEL_BITS)
-
-
-class MarksUnderlay:
-    """`Pipeline.underlay` drawing the marker marks of `camera` and `anchors` (the pipeline's) on each frame
-    with a pose and a detected marker; `display_scale` (display pixels per frame pixel) sets line widths."""
-
-    def __init__(self, camera, anchors: list):
-        self.camera, self.anchors = camera, list(anchors)
-        self.display_scale = 1.0
-
-    def __call__(self, image: np.ndarray, world_from_camera: np.ndarray | None, markers_seen: int) -> None:
-        marks = marker_marks(self.camera, self.anchors, world_from_camera, markers_seen)
-        if marks.quads or marks.axes:
-            draw_marks(image, marks, self.display_scale)
+    outline = _native(OUTLINE_RGB)
+    for (a, b), (_a, _b, kind) in zip((ends - (x0, y0)).reshape(-1, 2, 2), lines):
+        if kind < 0:
+            d = b - a
+            n = np.array([-d[1], d[0]]) / max(float(np.hypot(*d)), 1e-9) * 0.5
+            strokes, colour, thickness = ((a + n, b + n), (a - n, b - n)), outline, 1
+        else:
+            strokes, colour, thickness = ((a, b),), _native(AXIS_RGB[kind]), 2
+        for p, q in strokes:
+            p, q = np.round(p * one).astype(int), np.round(q * one).astype(int)
+            cv2.line(box, (int(p[0]), int(p[1])), (int(q[0]), int(q[1])), colour, thickness, cv2.LINE_AA,
+                     SUBPIXEL_BITS)
+    if composite is None or frame is None or under >= 1.0:
+        return
+    # the marks' pixels where the model is drawn: back towards the picture without them
+    ys, xs = np.nonzero((box != before).any(axis=2))
+    fx = np.clip(np.round((xs + x0 + 0.5) / sx - 0.5).astype(int), 0, marks.width - 1)
+    fy = np.clip(np.round((ys + y0 + 0.5) / sy - 0.5).astype(int), 0, marks.height - 1)
+    model = (composite[fy, fx] != frame[fy, fx]).any(axis=1)
+    ys, xs = ys[model], xs[model]
+    if len(ys):
+        old = before[ys, xs].astype(np.float32)
+        box[ys, xs] = np.round(old + (box[ys, xs] - old) * under).astype(np.uint8)
 
 
 _models_cache: tuple = (None, [])  # (the anchors list last asked about, its models): frames share one list

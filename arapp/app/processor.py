@@ -21,7 +21,7 @@ from typing import Any, Callable
 import cv2
 import numpy as np
 
-from arapp.app.overlay_marks import MarksUnderlay
+from arapp.app.overlay_marks import draw_marks, marker_marks, under_opacity
 from arapp.app.player import Captured
 from arapp.app.slots import LatestSlot
 from tracking.poses import invert
@@ -64,15 +64,6 @@ def to_bgra(image: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-def fit_scale(shape: tuple, size: tuple[int, int] | None) -> float:
-    """How many times its size an image of `shape` (h, w, ...) is shown to fit `size` (width, height);
-    1 for None."""
-    if size is None:
-        return 1.0
-    h, w = shape[:2]
-    return min(size[0] / w, size[1] / h)
-
-
 def fit_to(image: np.ndarray, size: tuple[int, int] | None) -> np.ndarray:
     """`image` scaled to fit `size` (width, height, device pixels) with its aspect kept; None: as it is.
 
@@ -82,7 +73,7 @@ def fit_to(image: np.ndarray, size: tuple[int, int] | None) -> np.ndarray:
     if size is None:
         return image
     h, w = image.shape[:2]
-    s = fit_scale(image.shape, size)
+    s = min(size[0] / w, size[1] / h)
     tw, th = max(1, int(round(w * s))), max(1, int(round(h * s)))
     if (tw, th) == (w, h):
         return image
@@ -95,8 +86,7 @@ def redraw(pipeline, item: Captured, last):
     The draw half of `Pipeline.process` without tracking: settings changed
     while paused show at once, and the tracker never sees a frame twice.
     """
-    seen = last.markers if last.state == "marker" else 0
-    out = pipeline.draw_overlay(item.image, last.world_from_camera, seen) if pipeline.draw else item.image
+    out = pipeline.draw_overlay(item.image, last.world_from_camera) if pipeline.draw else item.image
     return replace(last, image=out)
 
 
@@ -174,15 +164,12 @@ class Processor(threading.Thread):
         self._halt.set()
         self.inbox.wake()
 
-    def _sync_underlay(self) -> None:
-        """The pipeline draws the marker marks while `marks` is on, with widths for the display's scale."""
+    def _draw_marks(self, display: np.ndarray, result, frame: np.ndarray) -> None:
+        """The detected markers outlined in the display picture, under the model (arapp.app.overlay_marks)."""
+        seen = result.markers if getattr(result, "state", None) == "marker" else 0
         pipe = self.pipeline
-        if not self.marks:
-            pipe.underlay = None
-            return
-        if not isinstance(pipe.underlay, MarksUnderlay):
-            pipe.underlay = MarksUnderlay(pipe.camera, pipe.anchors)
-        pipe.underlay.display_scale = fit_scale((pipe.camera.height, pipe.camera.width), self.display_size)
+        marks = marker_marks(pipe.camera, pipe.anchors, result.world_from_camera, seen)
+        draw_marks(display, marks, result.image, frame, under_opacity(getattr(pipe, "mode", "shaded")))
 
     def _apply_commands(self) -> bool:
         changed = False
@@ -217,7 +204,6 @@ class Processor(threading.Thread):
                     break
                 started = time.perf_counter()
                 try:
-                    self._sync_underlay()
                     if item is None:
                         if not changed or self._last is None:
                             continue
@@ -242,6 +228,12 @@ class Processor(threading.Thread):
                         pass  # a stale selection (model changed meanwhile): draw nothing
                 composited = time.perf_counter()
                 display = self._display(shown_image)
+                if self.marks and result.world_from_camera is not None:
+                    try:
+                        self._draw_marks(display, result, item.image)
+                    except (ValueError, IndexError, AttributeError) as exc:  # the view goes on without them
+                        self._report("Cannot draw the detected markers", exc)
+                        self.marks = False
                 shown = Shown(result, display, item.image, item.captured_at, time.perf_counter(),
                               dropped_capture=self.inbox.dropped + self.skipped(),
                               qimage=None if self.wrap is None else self.wrap(display),

@@ -219,14 +219,14 @@ class Session:
         self.engine = engine
         if self.display_size is not None:
             engine.send(cmd.SetDisplaySize(self.display_size))
-        if self.show_marks:
-            engine.send(cmd.ShowMarks(True))
         self.events.source_opening.emit(name)
         engine.start()
         self.first_picture.start()
         self._push_model()
         if self.highlight is not None:
             engine.send(cmd.Highlight(self.highlight))
+        if self.show_marks:
+            engine.send(cmd.ShowMarks(True))
         if self.toolpaths_spec is not None:
             engine.send(cmd.ShowToolpaths(self.toolpaths_spec, self.toolpaths_gen))
         self.events.playing_changed.emit(True)

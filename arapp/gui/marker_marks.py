@@ -1,7 +1,7 @@
 """View > Show detected markers: outline each detected marker and draw the anchor's axes on the live view.
 
-The marks are drawn by the engine's processing thread into the frame, under the model
-(arapp.app.overlay_marks.MarksUnderlay), so the UI thread neither computes nor paints them; this module
+The engine's processing thread draws the marks into the picture it hands over, under the model
+(arapp.app.overlay_marks.draw_marks), so the UI thread neither computes nor paints them; this module
 only holds the menu toggle, remembered in the settings.
 """
 
