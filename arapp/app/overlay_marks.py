@@ -92,31 +92,62 @@ def draw_marks(display: np.ndarray, marks: MarkerMarks, composite: np.ndarray | 
     if x1 <= x0 or y1 <= y0:
         return
     box = display[y0:y1, x0:x1]
-    before = box.copy()
+    groups = _strokes((ends - (x0, y0)).reshape(-1, 2, 2), [kind for _a, _b, kind in lines])
+    model = None
+    if composite is not None and frame is not None and under < 1.0:
+        model = _model_mask(composite, frame, (x0, y0, x1, y1), (sx, sy))
+        before = box.copy() if model is not None else None
+    for (colour, thickness), polylines in groups.items():
+        cv2.polylines(box, polylines, False, colour, thickness, cv2.LINE_AA, SUBPIXEL_BITS)
+    if model is not None:
+        # where the model is drawn, the marks show only as much as its surface lets the paper through
+        seen = before if under <= 0.0 else cv2.addWeighted(box, under, before, 1.0 - under, 0.0)
+        out = cv2.copyTo(seen, model, box)  # in place over the view (ten times numpy's copyto with where)
+        if out is not box:
+            box[...] = out
+
+
+def _model_mask(composite: np.ndarray, frame: np.ndarray, box: tuple[int, int, int, int],
+                scale: tuple[float, float]) -> np.ndarray | None:
+    """uint8 (y1 - y0, x1 - x0), 1 at the display pixels of `box` (x0, y0, x1, y1) whose frame pixel
+    (nearest, the display being the frame `scale`d) shows the model: the composite differs from the frame
+    there. None when the model covers none of them."""
+    x0, y0, x1, y1 = box
+    sx, sy = scale
+    h, w = frame.shape[:2]
+    fx0, fy0 = max(int(np.floor((x0 + 0.5) / sx - 0.5)) - 1, 0), max(int(np.floor((y0 + 0.5) / sy - 0.5)) - 1, 0)
+    fx1, fy1 = min(int(np.ceil((x1 - 0.5) / sx + 0.5)) + 1, w), min(int(np.ceil((y1 - 0.5) / sy + 0.5)) + 1, h)
+    if fx1 <= fx0 or fy1 <= fy0:
+        return None
+    diff = cv2.absdiff(composite[fy0:fy1, fx0:fx1], frame[fy0:fy1, fx0:fx1])
+    # any channel differing: the channels' sum (saturated: nonzero exactly where one is; numpy's max over
+    # the last axis takes ten times as long)
+    changed = cv2.transform(diff, np.ones((1, diff.shape[2]))) if diff.ndim == 3 else diff
+    if not changed.any():
+        return None
+    # display pixel (u, v) of the box shows frame pixel ((u + x0 + 0.5) / sx - 0.5, ...): the inverse map
+    to_box = np.array([[sx, 0.0, (fx0 + 0.5) * sx - 0.5 - x0], [0.0, sy, (fy0 + 0.5) * sy - 0.5 - y0]])
+    return cv2.warpAffine(np.minimum(changed, 1), to_box, (x1 - x0, y1 - y0), flags=cv2.INTER_NEAREST)
+
+
+def _strokes(segments: np.ndarray, kinds: list[int]) -> dict:
+    """cv2 polylines (1/16 pixels) grouped by (colour, thickness) for line `segments` (N, 2, 2) of `kinds`
+    (MarkerMarks.lines): an outline edge as two 1-pixel lines half a pixel either side, an axis as one
+    line of thickness 2."""
     one = 1 << SUBPIXEL_BITS
-    outline = _native(OUTLINE_RGB)
-    for (a, b), (_a, _b, kind) in zip((ends - (x0, y0)).reshape(-1, 2, 2), lines):
-        if kind < 0:
-            d = b - a
-            n = np.array([-d[1], d[0]]) / max(float(np.hypot(*d)), 1e-9) * 0.5
-            strokes, colour, thickness = ((a + n, b + n), (a - n, b - n)), outline, 1
-        else:
-            strokes, colour, thickness = ((a, b),), _native(AXIS_RGB[kind]), 2
-        for p, q in strokes:
-            p, q = np.round(p * one).astype(int), np.round(q * one).astype(int)
-            cv2.line(box, (int(p[0]), int(p[1])), (int(q[0]), int(q[1])), colour, thickness, cv2.LINE_AA,
-                     SUBPIXEL_BITS)
-    if composite is None or frame is None or under >= 1.0:
-        return
-    # the marks' pixels where the model is drawn: back towards the picture without them
-    ys, xs = np.nonzero((box != before).any(axis=2))
-    fx = np.clip(np.round((xs + x0 + 0.5) / sx - 0.5).astype(int), 0, marks.width - 1)
-    fy = np.clip(np.round((ys + y0 + 0.5) / sy - 0.5).astype(int), 0, marks.height - 1)
-    model = (composite[fy, fx] != frame[fy, fx]).any(axis=1)
-    ys, xs = ys[model], xs[model]
-    if len(ys):
-        old = before[ys, xs].astype(np.float32)
-        box[ys, xs] = np.round(old + (box[ys, xs] - old) * under).astype(np.uint8)
+    kinds = np.asarray(kinds)
+    groups: dict = {}
+    edges = segments[kinds < 0]
+    if len(edges):
+        d = edges[:, 1] - edges[:, 0]
+        n = np.stack([-d[:, 1], d[:, 0]], 1) / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)[:, None] * 0.5
+        both = np.concatenate([edges + n[:, None], edges - n[:, None]])
+        groups[(_native(OUTLINE_RGB), 1)] = list(np.round(both * one).astype(np.int32))
+    for k in range(3):
+        axes = segments[kinds == k]
+        if len(axes):
+            groups[(_native(AXIS_RGB[k]), 2)] = list(np.round(axes * one).astype(np.int32))
+    return groups
 
 
 _models_cache: tuple = (None, [])  # (the anchors list last asked about, its models): frames share one list
