@@ -113,6 +113,34 @@ def test_a_claimed_slot_is_written_in_place_and_never_handed_out_twice():
     assert not segment_exists(ring.name)
 
 
+@pytest.mark.skipif(not hasattr(os, "setpriority") or not Path("/proc/self/task").is_dir(),
+                    reason="per-thread niceness (Linux)")
+def test_background_threads_of_the_pipeline_process_are_niced_and_the_rest_not():
+    """The child renices work no frame waits for (SLAM mapping, discovery, ...) once, the capture and
+    processing threads keep the process's priority; read back from /proc, not from the code under test."""
+    import threading
+
+    from arapp.gui.remote import BACKGROUND_NICE, renice_background
+
+    def nice_of(tid: int) -> int:
+        return int(Path(f"/proc/self/task/{tid}/stat").read_text().rsplit(")", 1)[1].split()[16])
+
+    stop = threading.Event()
+    mapping = threading.Thread(target=stop.wait, name="slam-mapping", daemon=True)
+    processing = threading.Thread(target=stop.wait, name="arapp-process", daemon=True)
+    mapping.start()
+    processing.start()
+    try:
+        base = nice_of(threading.get_native_id())
+        done: set[int] = set()
+        renice_background(done)
+        assert nice_of(mapping.native_id) == min(19, base + BACKGROUND_NICE)
+        assert nice_of(processing.native_id) == base
+        assert mapping.native_id in done and processing.native_id not in done
+    finally:
+        stop.set()
+
+
 def _meta(i: int, slot: int) -> dict:
     from arapp.gui.remote import STATE_KEYS
 

@@ -24,6 +24,7 @@ tessellates it itself).
 
 from __future__ import annotations
 
+import gc
 import multiprocessing as mp
 import os
 from multiprocessing import forkserver
@@ -48,7 +49,12 @@ PRELOAD = ["numpy", "cv2", "arapp.pipeline", "arapp.app.live", "tracking.sources
            "arapp.geometry.model", "trimesh"]
 # the model state each frame carries back (LiveEngine.state)
 STATE_KEYS = ("mesh_faces", "model_gen", "mode", "resets", "toolpaths", "discovery")
-CHILD_NICE = int(os.environ.get("LAT_NICE", "5"))  # TEMP
+# The capture, processing and anchor-detection threads run at the UI's own priority: the UI thread only
+# takes and paints (about a millisecond a frame) and, asleep between frames, is let on a core first when
+# it wakes, while a niced pipeline fell far behind the machine's other work (+5 gave it a third of a
+# normal process's share of the CPU). Work that no frame waits for runs niced, each thread once it exists.
+BACKGROUND_NICE = 5
+BACKGROUND_THREADS = ("slam-mapping", "arapp-discovery", "arapp-toolpaths", "arapp-record", "arapp-ar-video")
 _context = None
 _context_lock = threading.Lock()
 
@@ -108,6 +114,7 @@ class _Child:
         self.lock = threading.Lock()
         self.stop = threading.Event()
         self._claim: tuple[int, np.ndarray] | None = None  # the ring slot the next display picture is written to
+        self._frozen = False  # gc.freeze() done after the first frame
         self.engine = LiveEngine(spec, anchors=parse_anchors(anchors_json), speed=speed, loop=loop,
                                  playing=playing, display_size=display_size,
                                  display_buffer=None if full_frames else self.claim_slot)
@@ -181,6 +188,12 @@ class _Child:
         shown = self.engine.take(timeout=0.0)
         if shown is not None:
             self.send_frame(shown)
+            if not self._frozen:
+                # the modules, model, tracker and GL objects alive after the first frame stay for good: out of
+                # the collector's reach, a full collection is a young-objects one (~50 ms less, now and then,
+                # in whichever frame it falls)
+                gc.freeze()
+                self._frozen = True
 
     def send_frame(self, shown) -> None:
         r = shown.result
@@ -222,7 +235,9 @@ class _Child:
         threading.Thread(target=self.command_loop, name="arapp-commands", daemon=True).start()
         engine = self.engine
         engine.start()
+        reniced: set[int] = set()
         while not self.stop.wait(0.5):
+            renice_background(reniced)
             if not engine.running and engine.captured.peek() is None:
                 break
         engine.stop(wait=10.0)
@@ -236,15 +251,28 @@ class _Child:
         self.rings = []
 
 
+def renice_background(done: set[int]) -> None:
+    """Lower the priority of this process's BACKGROUND_THREADS not yet in `done` (their native ids, added) by
+    BACKGROUND_NICE below the calling thread's."""
+    try:
+        nice = min(19, os.getpriority(os.PRIO_PROCESS, 0) + BACKGROUND_NICE)
+    except (OSError, AttributeError):
+        return
+    for t in threading.enumerate():
+        tid = t.native_id
+        if tid is None or tid in done or not t.name.startswith(BACKGROUND_THREADS):
+            continue
+        done.add(tid)
+        try:
+            os.setpriority(os.PRIO_PROCESS, tid, nice)  # Linux: one thread's niceness
+        except (OSError, AttributeError):
+            pass  # gone meanwhile, or a platform without per-thread niceness
+
+
 def child_main(conn, frames, spec, anchors_json, speed, loop, playing, full_frames, display_size) -> None:
     """Entry point of the child process."""
     child = None
     try:
-        try:
-            # the UI process comes first for the CPU: a frame late by a few ms costs less than a UI that stalls
-            os.nice(CHILD_NICE)
-        except OSError:
-            pass
         child = _Child(conn, frames, spec, anchors_json, speed, loop, playing, full_frames, display_size)
         child.run()
     except Exception as exc:  # noqa: BLE001 - last resort: tell the UI why the process ends
