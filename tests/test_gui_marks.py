@@ -2,7 +2,7 @@
 the view's pixels along the marker's edges (found by OpenCV's own ArucoDetector on the frame as
 captured) change colour; off, they stay the frame's. The 2-D primitives are checked against
 cv2.projectPoints of the marker's corners at the same pose. The engine draws the marks into the picture
-it hands over to the view, under the model, and not into the composite kept for screenshots."""
+it hands over to the view, under the model, and not into the full-size composite (AR videos)."""
 
 from __future__ import annotations
 
@@ -111,7 +111,7 @@ def test_detected_marker_outlined_when_on_and_not_when_off(qtbot, window, record
     off = set_marks(qtbot, window, False)
     on = set_marks(qtbot, window, True)
     marked = window.session.last_shown
-    # only the view's picture has them: the composite kept for screenshots and videos is the frame itself
+    # only the view's picture has them: the full-size composite (AR videos) is the frame itself
     assert np.array_equal(marked.result.image, marked.frame)
     off_again = set_marks(qtbot, window, False)
 

@@ -8,8 +8,8 @@ off. Only markers whose four corners are in front of the camera and inside the f
 nothing is drawn on a frame where the tracker detected no marker (state "slam" or "lost").
 
 `draw_marks` draws them in the processing thread into the picture scaled to the view, after the
-model was composited, so the UI thread neither computes nor paints them and the composite kept for
-screenshots and videos stays without them. They lie on the paper, under the model: a mark's pixel
+model was composited, so the UI thread neither computes nor paints them and the full-size composite
+(`FrameResult.image`: AR videos) stays without them. They lie on the paper, under the model: a mark's pixel
 where the renderer drew the model (the composite differs from the frame as captured there: the
 compositor leaves every other pixel bit-exact) shows only as much as the display mode's surface lets
 the paper through (`under_opacity`: nothing when shaded).
