@@ -138,6 +138,16 @@ class Highlight:
 
 
 @dataclass(frozen=True)
+class ShowMarks:
+    """Outline the detected markers and draw the anchors' axes on the frames (under the model), or not."""
+
+    on: bool
+
+    def apply(self, engine) -> None:
+        engine.stage.set_marks(bool(self.on))
+
+
+@dataclass(frozen=True)
 class SetPlacement:
     """Move, turn or resize the shown model on the world anchor."""
 

@@ -122,7 +122,8 @@ class LiveEngine:
     spec: the source spec (arapp.app.sourcespec), or `opener()` returning an
     open source; anchors: AnchorSpecs tracked when the source names none;
     `pipeline_factory(source, info)` makes the pipeline in the processing
-    thread; `wrap(bgra)` runs there on each picture (the GUI's QImage).
+    thread; `wrap(bgra)` runs there on each picture (the GUI's QImage); `display_buffer(shape)` gives
+    the array each picture is written into (None: a new one; arapp.app.processor.Processor).
     A recording starts with its first frame only, and plays once that frame is
     on its way to the screen: otherwise it would run ahead while the pipeline
     starts up (GL, tracker), and those frames would be dropped unseen.
@@ -132,7 +133,8 @@ class LiveEngine:
                  anchors: list | None = None, speed: float = 1.0, loop: bool = False, playing: bool = True,
                  display_size: tuple[int, int] | None = None, on_demand: bool = ON_DEMAND,
                  pipeline_factory: Callable[[Any, SourceInfo], Any] = default_pipeline,
-                 wrap: Callable[[np.ndarray], Any] | None = None):
+                 wrap: Callable[[np.ndarray], Any] | None = None,
+                 display_buffer: Callable[[tuple], Any] | None = None):
         if opener is None and spec is None:
             raise ValueError("LiveEngine needs a source spec or an opener")
         self.spec = spec
@@ -140,6 +142,7 @@ class LiveEngine:
         self.default_anchors = list(anchors or [])
         self.pipeline_factory = pipeline_factory
         self.wrap = wrap
+        self.display_buffer = display_buffer
         self.events = Events("opened", "ready", "error", "ended", "recorded", "toolpaths")
         self.captured, self.shown = LatestSlot(), TappedSlot()
         self.ar_video: ArVideoWriter | None = None
@@ -182,7 +185,8 @@ class LiveEngine:
             self.info = info
             processor = Processor(lambda: self.pipeline_factory(source, info), self.captured, self.shown,
                                   on_ready=self._ready, on_error=self.events.error.emit,
-                                  skipped=lambda: self.player.skipped, wrap=self.wrap)
+                                  skipped=lambda: self.player.skipped, wrap=self.wrap,
+                                  display_buffer=self.display_buffer)
             self.discovery = DiscoveryStage(info.anchors, lambda d: self.state.__setitem__("discovery", d),
                                             default_anchors=_are_default(info.anchors),
                                             offer=not getattr(getattr(source, "session", None), "anchors", None))

@@ -1,5 +1,5 @@
-"""What to draw over the live view to show the markers the tracker sees: each marker's outline and a small
-RGB axis triad at each anchor's origin, as 2-D primitives in frame pixels. No Qt, no GL.
+"""The marks that show the markers the tracker sees on the live view: each marker's outline and a small
+RGB axis triad at each anchor's origin, drawn into the display picture. No Qt, no GL.
 
 The outlines are the anchors' marker corners (tracking.anchors.model: anchor frame, metres) projected
 with the frame's `world_from_camera` and the source's camera (distortion applied, as cv2.projectPoints),
@@ -7,120 +7,40 @@ so they lie on the markers as the pose puts them: where they sit off the printed
 off. Only markers whose four corners are in front of the camera and inside the frame are outlined, and
 nothing is drawn on a frame where the tracker detected no marker (state "slam" or "lost").
 
-The marks lie on the paper, under the model: `model_cover` is the placed model's silhouette in the frame
-(its triangles projected as the renderer projects them), and `MarkerMarks.pieces` splits each mark's
-line into the runs the model covers and those it does not, so the view paints a covered run at
-`under_opacity` (what shows through the model's surface in the display mode: nothing when shaded).
+`draw_marks` draws them in the processing thread into the picture scaled to the view, after the
+model was composited, so the UI thread neither computes nor paints them and the full-size composite
+(`FrameResult.image`: AR videos) stays without them. They lie on the paper, under the model: a mark's pixel
+where the renderer drew the model (the composite differs from the frame as captured there: the
+compositor leaves every other pixel bit-exact) shows only as much as the display mode's surface lets
+the paper through (`under_opacity`: nothing when shaded).
 """
 
 from __future__ import annotations
 
-import copy
+import sys
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
-from arapp.placement import world_from_model
 from arapp.render.modes import SURFACE_ALPHA
 from tracking.anchors.model import build_models
 
 # the triad's length in marker sides: plain to see, and short of the next marker on a board
 AXIS_SHARE = 1.0
 MIN_DEPTH_M = 0.01  # points nearer the camera than this (or behind it) are not drawn
-COVER_SCALE = 0.5  # the silhouette's cells: 2 frame pixels wide (its edge within a pixel or two)
-PIECE_PX = 2.0  # a mark's line is tested against the silhouette every this many frame pixels
-
-
-def model_world_vertices(model, mesh, placement, anchor) -> np.ndarray:
-    """The display mesh's vertices in the world (metres) with `model` placed at `placement` on `anchor`
-    (as the pipeline places it: arapp.placement.world_from_model)."""
-    placed = copy.copy(model)
-    placed.placement = placement
-    T = world_from_model(anchor, placed)
-    v = np.asarray(mesh.vertices, float)
-    return v @ T[:3, :3].T + T[:3, 3]
+OUTLINE_RGB = (0, 230, 255)  # cyan: stands out on paper, skin and wood alike
+AXIS_RGB = ((255, 40, 40), (40, 220, 40), (60, 110, 255))  # x red, y green, z blue
+# line widths in display pixels, as cv2's antialiased lines come out: an outline edge is two 1-pixel
+# lines half a pixel either side of it (about 2 px), an axis one line of thickness 2 (about 3 px)
+OUTLINE_PX, AXIS_PX = 2, 3
+SUBPIXEL_BITS = 4  # cv2 drawing with 1/16-pixel positions
+LIMIT_PX = 1e6  # line ends are clipped to this far off the picture (cv2 takes int32 positions)
 
 
 def under_opacity(mode: str) -> float:
     """How much of a mark under the model shows through its surface in display `mode` (0: none)."""
     return max(0.0, 1.0 - float(SURFACE_ALPHA.get(mode, 1.0)))
-
-
-@dataclass
-class Cover:
-    """The model's silhouette: `mask` (uint8, 1 where the model is) on a grid of cells `1 / scale` frame
-    pixels wide."""
-
-    mask: np.ndarray
-    scale: float
-
-    def covered(self, uv: np.ndarray) -> np.ndarray:
-        """Boolean per frame pixel position (N, 2): the model covers it."""
-        h, w = self.mask.shape
-        ij = np.floor((np.asarray(uv, float).reshape(-1, 2) + 0.5) * self.scale).astype(int)
-        ok = (ij[:, 0] >= 0) & (ij[:, 0] < w) & (ij[:, 1] >= 0) & (ij[:, 1] < h)
-        out = np.zeros(len(ij), bool)
-        out[ok] = self.mask[ij[ok, 1], ij[ok, 0]] > 0
-        return out
-
-
-def fill_triangles(tri: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """uint8 mask of `shape` (h, w) with 1 in each cell whose centre lies in one of the triangles
-    (tri: (F, 3, 2) in cell units, cell (i, j) spanning [i, i + 1) x [j, j + 1)), and in the cell of each
-    triangle's centroid (a triangle smaller than a cell still covers one). A union, unlike cv2.fillPoly's
-    even-odd rule, under which overlapping triangles cancel out."""
-    h, w = shape
-    mask = np.zeros((h, w), np.uint8)
-    tri = np.asarray(tri, np.float32)
-    if not len(tri):
-        return mask
-    tmin, tmax = tri.min(axis=1), tri.max(axis=1)
-    onscreen = (tmax[:, 0] >= 0) & (tmax[:, 1] >= 0) & (tmin[:, 0] < w) & (tmin[:, 1] < h)
-    tri, tmin, tmax = tri[onscreen], tmin[onscreen], tmax[onscreen]
-    if not len(tri):
-        return mask
-    lo = np.clip(np.floor(tmin).astype(np.int32), 0, [w - 1, h - 1])
-    hi = np.clip(np.floor(tmax).astype(np.int32), 0, [w - 1, h - 1])
-    # each edge a -> b as a line equation e(p) = A x + B y + C, signed so that inside is e >= 0 for all three
-    a, b = tri, np.roll(tri, -1, axis=1)
-    A, B = a[..., 1] - b[..., 1], b[..., 0] - a[..., 0]
-    C = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    area = (tri[:, 1, 0] - tri[:, 0, 0]) * (tri[:, 2, 1] - tri[:, 0, 1]) - (tri[:, 1, 1] - tri[:, 0, 1]) * (tri[:, 2, 0] - tri[:, 0, 0])
-    sign = np.where(area < 0, -1.0, 1.0).astype(np.float32)[:, None]
-    coef = np.concatenate([A * sign, B * sign, C * sign], axis=1)  # (F, 9): A0 A1 A2 B0 B1 B2 C0 C1 C2
-    n = hi - lo + 1
-    count = n[:, 0] * n[:, 1]
-    k = np.repeat(np.arange(len(tri)), count)  # one row per (triangle, cell of its box)
-    off = np.arange(len(k), dtype=np.int32) - np.repeat((np.cumsum(count) - count).astype(np.int32), count)
-    nx = n[k, 0]
-    ix, iy = lo[k, 0] + off % nx, lo[k, 1] + off // nx
-    px, py = ix.astype(np.float32) + 0.5, iy.astype(np.float32) + 0.5
-    c = coef[k]
-    inside = ((c[:, 0] * px + c[:, 3] * py + c[:, 6] >= 0) & (c[:, 1] * px + c[:, 4] * py + c[:, 7] >= 0)
-              & (c[:, 2] * px + c[:, 5] * py + c[:, 8] >= 0))
-    mask[iy[inside], ix[inside]] = 1
-    cen = np.floor(tri.mean(axis=1)).astype(np.int32)
-    ok = (cen[:, 0] >= 0) & (cen[:, 0] < w) & (cen[:, 1] >= 0) & (cen[:, 1] < h)
-    mask[cen[ok, 1], cen[ok, 0]] = 1
-    return mask
-
-
-def model_cover(camera, vertices_world: np.ndarray, faces: np.ndarray, world_from_camera: np.ndarray,
-                scale: float = COVER_SCALE) -> Cover:
-    """The silhouette of a mesh (vertices in the world, metres; faces (F, 3)) seen by `camera` from
-    `world_from_camera`: vertices projected with lens distortion as cv2.projectPoints (edges straight
-    between them), triangles with a vertex behind the camera left out; cells `1 / scale` pixels wide."""
-    v = np.asarray(vertices_world, float)
-    f = np.asarray(faces, np.int64)
-    shape = (int(np.ceil(camera.height * scale)), int(np.ceil(camera.width * scale)))
-    if not len(v) or not len(f):
-        return Cover(np.zeros(shape, np.uint8), scale)
-    pose = np.asarray(world_from_camera, float)
-    camera_from_world = np.linalg.inv(pose)
-    depth = v @ camera_from_world[2, :3] + camera_from_world[2, 3]
-    uv = camera.project_world(v, pose)
-    keep = (depth > MIN_DEPTH_M)[f].all(axis=1)
-    return Cover(fill_triangles((uv[f[keep]] + 0.5) * scale, shape), scale)
 
 
 @dataclass
@@ -135,37 +55,99 @@ class MarkerMarks:
     height: int
     quads: list[np.ndarray] = field(default_factory=list)
     axes: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = field(default_factory=list)
-    cover: Cover | None = None  # the model's silhouette (None: no model shown)
-    under_opacity: float = 0.0  # the opacity of a mark's run under the model
-
-    def pieces(self, a, b) -> list[tuple[np.ndarray, np.ndarray, bool]]:
-        """The line a -> b (frame pixels) as runs (start, end, covered by the model), in order."""
-        return self.runs([(a, b)])[0]
-
-    def runs(self, lines) -> list[list[tuple[np.ndarray, np.ndarray, bool]]]:
-        """`pieces` of many lines [(a, b), ...], with one silhouette test for all their samples."""
-        lines = [(np.asarray(a, float), np.asarray(b, float)) for a, b in lines]
-        if self.cover is None:
-            return [[(a, b, False)] for a, b in lines]
-        counts = [max(1, int(np.ceil(np.linalg.norm(b - a) / PIECE_PX))) for a, b in lines]
-        ts = [(np.arange(n) + 0.5) / n for n in counts]  # the middle of each of n steps
-        pts = np.concatenate([a + t[:, None] * (b - a) for (a, b), t in zip(lines, ts)]) if lines else np.zeros((0, 2))
-        hits = np.split(self.cover.covered(pts), np.cumsum(counts)[:-1])
-        out = []
-        for (a, b), n, hit in zip(lines, counts, hits):
-            runs, start = [], 0
-            for k in range(1, n + 1):
-                if k == n or hit[k] != hit[start]:
-                    runs.append((a + (start / n) * (b - a), a + (k / n) * (b - a), bool(hit[start])))
-                    start = k
-            out.append(runs)
-        return out
 
     def lines(self) -> list[tuple[np.ndarray, np.ndarray, int]]:
         """Every mark's line as (a, b, kind): kind -1 for a marker outline's edge, 0/1/2 for an x/y/z axis."""
         out = [(q[k], q[(k + 1) % 4], -1) for q in self.quads for k in range(4)]
         out += [(origin, end, i) for origin, *ends in self.axes for i, end in enumerate(ends)]
         return out
+
+
+def _native(rgb: tuple[int, int, int]) -> tuple[int, int, int, int]:
+    """An opaque colour in the display picture's 32-bit order (arapp.app.processor.to_bgra)."""
+    r, g, b = rgb
+    return (b, g, r, 255) if sys.byteorder == "little" else (255, r, g, b)
+
+
+def draw_marks(display: np.ndarray, marks: MarkerMarks, composite: np.ndarray | None = None,
+               frame: np.ndarray | None = None, under: float = 0.0) -> None:
+    """Draw `marks` (frame pixels) into `display` in place: the (h, w, 4) uint8 picture of the frame scaled
+    to the view (its aspect kept), antialiased lines OUTLINE_PX / AXIS_PX display pixels wide.
+
+    composite, frame: the full-size BGR frame with the model drawn and as captured; where they differ
+    (the model), a mark's pixel keeps only `under` of its colour (under_opacity of the display mode).
+    """
+    h, w = display.shape[:2]
+    sx, sy = w / marks.width, h / marks.height
+    lines = marks.lines()
+    if not lines:
+        return
+    # the lines' box in the display (a few pixels wider for line width and antialiasing), clipped
+    ends = np.array([[a, b] for a, b, _ in lines], float).reshape(-1, 2)
+    ends = np.clip((ends + 0.5) * (sx, sy) - 0.5, -LIMIT_PX, LIMIT_PX)
+    if not np.isfinite(ends).all():
+        return
+    x0, y0 = np.maximum(np.floor(ends.min(axis=0)).astype(int) - 4, 0)
+    x1, y1 = np.minimum(np.ceil(ends.max(axis=0)).astype(int) + 5, (w, h))
+    if x1 <= x0 or y1 <= y0:
+        return
+    box = display[y0:y1, x0:x1]
+    groups = _strokes((ends - (x0, y0)).reshape(-1, 2, 2), [kind for _a, _b, kind in lines])
+    model = None
+    if composite is not None and frame is not None and under < 1.0:
+        model = _model_mask(composite, frame, (x0, y0, x1, y1), (sx, sy))
+        before = box.copy() if model is not None else None
+    for (colour, thickness), polylines in groups.items():
+        cv2.polylines(box, polylines, False, colour, thickness, cv2.LINE_AA, SUBPIXEL_BITS)
+    if model is not None:
+        # where the model is drawn, the marks show only as much as its surface lets the paper through
+        seen = before if under <= 0.0 else cv2.addWeighted(box, under, before, 1.0 - under, 0.0)
+        out = cv2.copyTo(seen, model, box)  # in place over the view (ten times numpy's copyto with where)
+        if out is not box:
+            box[...] = out
+
+
+def _model_mask(composite: np.ndarray, frame: np.ndarray, box: tuple[int, int, int, int],
+                scale: tuple[float, float]) -> np.ndarray | None:
+    """uint8 (y1 - y0, x1 - x0), 1 at the display pixels of `box` (x0, y0, x1, y1) whose frame pixel
+    (nearest, the display being the frame `scale`d) shows the model: the composite differs from the frame
+    there. None when the model covers none of them."""
+    x0, y0, x1, y1 = box
+    sx, sy = scale
+    h, w = frame.shape[:2]
+    fx0, fy0 = max(int(np.floor((x0 + 0.5) / sx - 0.5)) - 1, 0), max(int(np.floor((y0 + 0.5) / sy - 0.5)) - 1, 0)
+    fx1, fy1 = min(int(np.ceil((x1 - 0.5) / sx + 0.5)) + 1, w), min(int(np.ceil((y1 - 0.5) / sy + 0.5)) + 1, h)
+    if fx1 <= fx0 or fy1 <= fy0:
+        return None
+    diff = cv2.absdiff(composite[fy0:fy1, fx0:fx1], frame[fy0:fy1, fx0:fx1])
+    # any channel differing: the channels' sum (saturated: nonzero exactly where one is; numpy's max over
+    # the last axis takes ten times as long)
+    changed = cv2.transform(diff, np.ones((1, diff.shape[2]))) if diff.ndim == 3 else diff
+    if not changed.any():
+        return None
+    # display pixel (u, v) of the box shows frame pixel ((u + x0 + 0.5) / sx - 0.5, ...): the inverse map
+    to_box = np.array([[sx, 0.0, (fx0 + 0.5) * sx - 0.5 - x0], [0.0, sy, (fy0 + 0.5) * sy - 0.5 - y0]])
+    return cv2.warpAffine(np.minimum(changed, 1), to_box, (x1 - x0, y1 - y0), flags=cv2.INTER_NEAREST)
+
+
+def _strokes(segments: np.ndarray, kinds: list[int]) -> dict:
+    """cv2 polylines (1/16 pixels) grouped by (colour, thickness) for line `segments` (N, 2, 2) of `kinds`
+    (MarkerMarks.lines): an outline edge as two 1-pixel lines half a pixel either side, an axis as one
+    line of thickness 2."""
+    one = 1 << SUBPIXEL_BITS
+    kinds = np.asarray(kinds)
+    groups: dict = {}
+    edges = segments[kinds < 0]
+    if len(edges):
+        d = edges[:, 1] - edges[:, 0]
+        n = np.stack([-d[:, 1], d[:, 0]], 1) / np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)[:, None] * 0.5
+        both = np.concatenate([edges + n[:, None], edges - n[:, None]])
+        groups[(_native(OUTLINE_RGB), 1)] = list(np.round(both * one).astype(np.int32))
+    for k in range(3):
+        axes = segments[kinds == k]
+        if len(axes):
+            groups[(_native(AXIS_RGB[k]), 2)] = list(np.round(axes * one).astype(np.int32))
+    return groups
 
 
 _models_cache: tuple = (None, [])  # (the anchors list last asked about, its models): frames share one list
@@ -178,12 +160,10 @@ def _models(anchors: list) -> list:
     return _models_cache[1]
 
 
-def marker_marks(camera, anchors: list, world_from_camera: np.ndarray | None, markers_seen: int = 1,
-                 cover: Cover | None = None, mode: str = "shaded") -> MarkerMarks:
+def marker_marks(camera, anchors: list, world_from_camera: np.ndarray | None, markers_seen: int = 1) -> MarkerMarks:
     """The outlines and axis triads of `anchors` (AnchorSpec list) seen by `camera` (tracking.camera.Camera)
-    from `world_from_camera` (4x4, metres); empty without a pose or when `markers_seen` is 0. `cover`: the
-    model's silhouette (model_cover), drawn in display `mode`."""
-    marks = MarkerMarks(int(camera.width), int(camera.height), cover=cover, under_opacity=under_opacity(mode))
+    from `world_from_camera` (4x4, metres); empty without a pose or when `markers_seen` is 0."""
+    marks = MarkerMarks(int(camera.width), int(camera.height))
     if world_from_camera is None or markers_seen <= 0 or not anchors:
         return marks
     pose = np.asarray(world_from_camera, float)
@@ -202,7 +182,7 @@ def marker_marks(camera, anchors: list, world_from_camera: np.ndarray | None, ma
             side = float(np.ptp(outline[:, 0])) if len(outline) else 0.05
         length = AXIS_SHARE * side
         triads_w.append(model.to_world(np.array([[0, 0, 0], [length, 0, 0], [0, length, 0], [0, 0, length]], float)))
-    # one projection for every point: the per-frame cost stays well under a millisecond on the UI thread
+    # one projection for every point: well under a millisecond per frame
     pts = np.concatenate(quads_w + triads_w).reshape(-1, 3)
     depth = pts @ camera_from_world[2, :3] + camera_from_world[2, 3]
     uv = camera.project_world(pts, pose)

@@ -15,12 +15,13 @@ import sys
 import threading
 import time
 import traceback
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 import cv2
 import numpy as np
 
+from arapp.app.overlay_marks import draw_marks, marker_marks, under_opacity
 from arapp.app.player import Captured
 from arapp.app.slots import LatestSlot
 from tracking.poses import invert
@@ -40,19 +41,35 @@ class Shown:
     dropped_capture: int = 0
     dropped_paint: int = 0
     qimage: Any = None
+    # timing marks between captured_at and processed_at and after (perf_counter seconds, one clock for the
+    # UI and the pipeline process on Linux): "start" (processing began), "composited" (tracked and drawn);
+    # the GUI engines add "sent" and "received" (the child process's hand-over) and "taken" (by the UI)
+    stages: dict = field(default_factory=dict)
 
 
-def to_bgra(image: np.ndarray) -> np.ndarray:
+def to_bgra(image: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     """A (H, W, 3) BGR or (H, W) grey uint8 array as (H, W, 4) in the screen's native 32-bit order
-    (B, G, R, 255 bytes on little-endian machines; A, R, G, B on big-endian), so painting is a copy."""
-    bgra = cv2.cvtColor(image, cv2.COLOR_GRAY2BGRA if image.ndim == 2 else cv2.COLOR_BGR2BGRA)
+    (B, G, R, 255 bytes on little-endian machines; A, R, G, B on big-endian), so painting is a copy.
+    `out`: an (H, W, 4) uint8 array to write it into (a shared-memory slot), returned."""
+    code = cv2.COLOR_GRAY2BGRA if image.ndim == 2 else cv2.COLOR_BGR2BGRA
     if sys.byteorder != "little":
-        bgra = np.ascontiguousarray(bgra[:, :, ::-1])
-    return bgra
+        bgra = np.ascontiguousarray(cv2.cvtColor(image, code)[:, :, ::-1])
+        if out is None:
+            return bgra
+        np.copyto(out, bgra)
+        return out
+    if out is None:
+        return cv2.cvtColor(image, code)
+    cv2.cvtColor(image, code, dst=out)
+    return out
 
 
 def fit_to(image: np.ndarray, size: tuple[int, int] | None) -> np.ndarray:
-    """`image` scaled to fit `size` (width, height, device pixels) with its aspect kept; None: as it is."""
+    """`image` scaled to fit `size` (width, height, device pixels) with its aspect kept; None: as it is.
+
+    Bilinear down to half size: a window a little smaller than the frame costs about 1 ms a 720p frame
+    that way, where INTER_AREA's non-integer path takes 3 ms on an idle 2-core machine and several times
+    that under load; below half size bilinear would skip pixels, so INTER_AREA averages them."""
     if size is None:
         return image
     h, w = image.shape[:2]
@@ -60,7 +77,7 @@ def fit_to(image: np.ndarray, size: tuple[int, int] | None) -> np.ndarray:
     tw, th = max(1, int(round(w * s))), max(1, int(round(h * s)))
     if (tw, th) == (w, h):
         return image
-    return cv2.resize(image, (tw, th), interpolation=cv2.INTER_AREA if s < 1.0 else cv2.INTER_LINEAR)
+    return cv2.resize(image, (tw, th), interpolation=cv2.INTER_AREA if s < 0.5 else cv2.INTER_LINEAR)
 
 
 def redraw(pipeline, item: Captured, last):
@@ -103,15 +120,21 @@ class Processor(threading.Thread):
     fn(pipeline) between frames; after one, the last frame is processed again
     so a change shows while replay is paused. `wrap(bgra)`, when given, runs here too and its
     result becomes `Shown.qimage` (the GUI wraps the picture as a QImage without copying it).
+    `display_buffer((h, w, 4))`, when given, returns the array to write the display picture into (a
+    shared-memory slot of the child process's frame ring, so the picture is written once), or None for
+    a new one.
     """
 
     def __init__(self, make_pipeline: Callable[[], Any], inbox: LatestSlot, out: LatestSlot, *,
                  on_ready=None, on_error=None, skipped: Callable[[], int] | None = None,
-                 wrap: Callable[[np.ndarray], Any] | None = None, name: str = "arapp-process"):
+                 wrap: Callable[[np.ndarray], Any] | None = None,
+                 display_buffer: Callable[[tuple], np.ndarray | None] | None = None, name: str = "arapp-process"):
         super().__init__(name=name, daemon=True)
         self.skipped = skipped or (lambda: 0)
         self.wrap = wrap
+        self.display_buffer = display_buffer
         self.highlight: tuple[int, int, int] | None = None  # (surface, i, j) control point marked on screen
+        self.marks = False  # outline the detected markers, under the model (arapp.app.overlay_marks)
         # watch(image, world_from_camera) after each newly tracked frame (anchor discovery: arapp.app.discovery)
         self.watch: Callable[[np.ndarray, Any], None] | None = None
         # (width, height) the view shows the frame at; the image is scaled here, off the UI thread,
@@ -133,11 +156,20 @@ class Processor(threading.Thread):
         self.inbox.wake()
 
     def _display(self, image: np.ndarray) -> np.ndarray:
-        return to_bgra(fit_to(image, self.display_size))
+        scaled = fit_to(image, self.display_size)
+        out = None if self.display_buffer is None else self.display_buffer(scaled.shape[:2] + (4,))
+        return to_bgra(scaled, out)
 
     def stop(self) -> None:
         self._halt.set()
         self.inbox.wake()
+
+    def _draw_marks(self, display: np.ndarray, result, frame: np.ndarray) -> None:
+        """The detected markers outlined in the display picture, under the model (arapp.app.overlay_marks)."""
+        seen = result.markers if getattr(result, "state", None) == "marker" else 0
+        pipe = self.pipeline
+        marks = marker_marks(pipe.camera, pipe.anchors, result.world_from_camera, seen)
+        draw_marks(display, marks, result.image, frame, under_opacity(getattr(pipe, "mode", "shaded")))
 
     def _apply_commands(self) -> bool:
         changed = False
@@ -170,6 +202,7 @@ class Processor(threading.Thread):
                 changed = self._apply_commands()
                 if self._halt.is_set():
                     break
+                started = time.perf_counter()
                 try:
                     if item is None:
                         if not changed or self._last is None:
@@ -195,10 +228,18 @@ class Processor(threading.Thread):
                                                          *self.highlight)
                     except (IndexError, ValueError, AttributeError):
                         pass  # a stale selection (model changed meanwhile): draw nothing
+                composited = time.perf_counter()
                 display = self._display(shown_image)
+                if self.marks and result.world_from_camera is not None:
+                    try:
+                        self._draw_marks(display, result, item.image)
+                    except (ValueError, IndexError, AttributeError) as exc:  # the view goes on without them
+                        self._report("Cannot draw the detected markers", exc)
+                        self.marks = False
                 shown = Shown(result, display, item.image, item.captured_at, time.perf_counter(),
                               dropped_capture=self.inbox.dropped + self.skipped(),
-                              qimage=None if self.wrap is None else self.wrap(display))
+                              qimage=None if self.wrap is None else self.wrap(display),
+                              stages={"start": started, "composited": composited})
                 self.out.put(shown)
                 if self.on_ready is not None:
                     self.on_ready()
@@ -213,7 +254,7 @@ class Processor(threading.Thread):
 class ProcessingStage:
     """Where an engine keeps its Processor, which exists only once the source is open. Commands
     submitted before then wait and are handed over in order; the view's settings (display size,
-    ringed control point) are kept and given to the processor when it starts. Used by both engines
+    ringed control point, marker marks) are kept and given to the processor when it starts. Used by both engines
     (threads here, the child process in remote.py); any thread."""
 
     def __init__(self, display_size: tuple[int, int] | None = None):
@@ -222,11 +263,13 @@ class ProcessingStage:
         self.processor: Processor | None = None
         self.display_size = display_size
         self.highlight: tuple[int, int, int] | None = None
+        self.marks = False
 
     def start(self, processor: Processor) -> None:
         """Hand over the queued commands and settings, then start the processing thread."""
         processor.display_size = self.display_size
         processor.highlight = self.highlight
+        processor.marks = self.marks
         with self._lock:
             self.processor = processor
             for fn in self._pending:
@@ -255,6 +298,14 @@ class ProcessingStage:
             processor = self.processor
         if processor is not None:
             processor.highlight = point
+            processor.submit(lambda p: None)  # redraw a paused frame
+
+    def set_marks(self, on: bool) -> None:
+        self.marks = bool(on)
+        with self._lock:
+            processor = self.processor
+        if processor is not None:
+            processor.marks = self.marks
             processor.submit(lambda p: None)  # redraw a paused frame
 
     def current(self) -> Processor | None:

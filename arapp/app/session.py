@@ -141,6 +141,7 @@ class Session:
         self.display_size: tuple[int, int] | None = None
         self.model_gen = 0
         self.highlight: tuple[int, int, int] | None = None  # the control point being edited, ringed
+        self.show_marks = False  # the detected markers outlined on the frames (`set_show_marks`)
         self.toolpaths_spec: dict | None = None  # the print preview asked for (arapp.app.toolpaths.preview_spec)
         self.toolpaths_gen = 0
         self.toolpaths_info: dict | None = None  # what the engine drew
@@ -232,6 +233,8 @@ class Session:
             engine.send(cmd.SetOcclusion(self.occlusion))
         if self.highlight is not None:
             engine.send(cmd.Highlight(self.highlight))
+        if self.show_marks:
+            engine.send(cmd.ShowMarks(True))
         if self.toolpaths_spec is not None:
             engine.send(cmd.ShowToolpaths(self.toolpaths_spec, self.toolpaths_gen))
         self.scenes.engine_started()
@@ -269,6 +272,12 @@ class Session:
             self.engine.stop(wait=wait)
         for e in self.old_engines:
             e.stop(wait=wait / 2)
+
+    def set_show_marks(self, on: bool) -> None:
+        """Outline the markers the tracker detects, with the anchors' axes, on the frames shown (drawn by the
+        engine under the model: arapp.app.overlay_marks), or not."""
+        self.show_marks = bool(on)
+        self.send(cmd.ShowMarks(self.show_marks))
 
     def set_display_size(self, width: int, height: int) -> None:
         self.display_size = (int(width), int(height))

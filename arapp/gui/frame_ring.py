@@ -1,7 +1,8 @@
 """Shared-memory frame slots between the pipeline child process and the UI process (no Qt).
 
 The child writes each display frame (BGRA uint8) into a free slot of a
-`FrameRing` and sends only the slot's number over the pipe; the UI process
+`FrameRing` (`claim` a slot, write the picture there in place, `publish` it;
+`write` copies a finished array) and sends only the slot's number over the pipe; the UI process
 maps the same memory once (`RingReader`) and wraps the slot in place, so a
 720p frame crosses the process boundary without a copy. Ownership is one
 flag byte per slot at the ring's start: the child sets it (0 -> 1) after
@@ -33,38 +34,65 @@ class FrameRing:
         self.shm = shared_memory.SharedMemory(create=True, size=HEADER + self.count * self.slot_bytes)
         self.name = self.shm.name
         self._next = 0
+        self._claimed: set[int] = set()  # slots being written here (flag still 0: the UI leaves them alone)
         self.dropped = 0  # frames not written because every slot was still held by the UI
 
     def fits(self, array: np.ndarray) -> bool:
         return array.nbytes <= self.slot_bytes
 
-    def write(self, array: np.ndarray) -> int | None:
-        """Copy `array` into a free slot and mark it held; its index, or None when none is free."""
+    def claim(self, shape: tuple) -> tuple[int, np.ndarray] | None:
+        """A free slot to write a frame of `shape` (uint8) into: (index, the array over it), or None (counted
+        as dropped) when the UI holds every slot. `publish` or `abandon` it."""
+        if int(np.prod(shape)) > self.slot_bytes:
+            raise ValueError(f"a frame of {shape} does not fit the ring's {self.slot_bytes}-byte slots")
         flags = np.ndarray((self.count,), np.uint8, self.shm.buf)
         try:
             for k in range(self.count):
                 i = (self._next + k) % self.count
-                if flags[i] == 0:
+                if flags[i] == 0 and i not in self._claimed:
                     break
             else:
                 self.dropped += 1
                 return None
-            dst = np.ndarray(array.shape, np.uint8, self.shm.buf, HEADER + i * self.slot_bytes)
-            np.copyto(dst, array)
-            del dst
-            flags[i] = 1
-            self._next = (i + 1) % self.count
-            return i
         finally:
             del flags
+        self._claimed.add(i)
+        self._next = (i + 1) % self.count
+        return i, np.ndarray(tuple(shape), np.uint8, self.shm.buf, HEADER + i * self.slot_bytes)
+
+    def publish(self, slot: int) -> None:
+        """The frame in claimed `slot` is written: mark it held (the UI releases it)."""
+        self._claimed.discard(slot)
+        flags = np.ndarray((self.count,), np.uint8, self.shm.buf)
+        flags[slot] = 1
+        del flags
+
+    def abandon(self, slot: int) -> None:
+        """Claimed `slot` was not sent after all: free again."""
+        self._claimed.discard(slot)
+
+    def write(self, array: np.ndarray) -> int | None:
+        """Copy `array` into a free slot and mark it held; its index, or None when none is free."""
+        got = self.claim(array.shape)
+        if got is None:
+            return None
+        i, dst = got
+        np.copyto(dst, array)
+        del dst
+        self.publish(i)
+        return i
 
     def close(self) -> None:
-        """Unmap and unlink (the UI may have unlinked it already)."""
-        self.shm.close()
+        """Unlink (the UI may have done so already) and unmap; a mapping still under a frame array here is
+        left to go with the process."""
         try:
             self.shm.unlink()
         except FileNotFoundError:
             pass
+        try:
+            self.shm.close()
+        except BufferError:
+            pass  # a display picture still points into it
 
 
 class RingReader:

@@ -7,13 +7,14 @@ the UI thread stalls for hundreds of milliseconds on a loaded 2-core machine
 
 The child (started from a fork server that has the heavy modules imported
 already, so it starts in a fraction of a second) runs the same `Player` and
-`Processor` threads as `workers.Engine` (an `arapp.app.live.LiveEngine`). Finished frames, already scaled to
-the view and converted to the screen's 32-bit format, come back through shared memory
-(`arapp.gui.frame_ring`: the pipe carries only their metadata and slot number);
-a receiver thread in the UI process wraps each slot in place as a QImage into a
-latest-frame-wins slot and signals the UI thread, which only paints. A frame
-replaced before the UI took it frees its slot at once; the frame shown frees
-its slot when the next one is taken.
+`Processor` threads as `workers.Engine` (an `arapp.app.live.LiveEngine`). The processing thread writes
+each finished picture, scaled to the view and in the screen's 32-bit format, straight into a slot of
+shared memory (`arapp.gui.frame_ring`) and sends the slot's number with the frame's metadata on a
+pipe of its own; that pipe wakes the UI thread's event loop (a QSocketNotifier), which wraps the
+newest slot in place as a QImage and paints it: no copy of the picture and no thread in between.
+Frames that came meanwhile are dropped and free their slots at once; the frame shown frees its slot
+when the next one is taken. Everything else (events, and whole frames when `full_frames` asks for
+them) comes on the command pipe, read by a receiver thread.
 Commands go the other way as the `arapp.app.commands` dataclasses themselves
 (a model travels as its path plus control-point edits; the child loads and
 tessellates it itself).
@@ -23,6 +24,7 @@ tessellates it itself).
 
 from __future__ import annotations
 
+import gc
 import multiprocessing as mp
 import os
 from multiprocessing import forkserver
@@ -31,7 +33,7 @@ import time
 import traceback
 
 import numpy as np
-from PySide6.QtCore import QObject, Signal
+from PySide6.QtCore import QObject, QSocketNotifier, Signal
 from PySide6.QtGui import QImage
 
 from arapp.app.commands import Pause, Play, SetDisplaySize, SetModel, Step, Stop
@@ -47,7 +49,12 @@ PRELOAD = ["numpy", "cv2", "arapp.pipeline", "arapp.app.live", "tracking.sources
            "arapp.geometry.model", "trimesh"]
 # the model state each frame carries back (LiveEngine.state)
 STATE_KEYS = ("mesh_faces", "model_gen", "mode", "resets", "toolpaths", "discovery")
-CHILD_NICE = 5  # the pipeline process's niceness above the UI's
+# The capture, processing and anchor-detection threads run at the UI's own priority: the UI thread only
+# takes and paints (about a millisecond a frame) and, asleep between frames, is let on a core first when
+# it wakes, while a niced pipeline fell far behind the machine's other work (+5 gave it a third of a
+# normal process's share of the CPU). Work that no frame waits for runs niced, each thread once it exists.
+BACKGROUND_NICE = 5
+BACKGROUND_THREADS = ("slam-mapping", "arapp-discovery", "arapp-toolpaths", "arapp-record", "arapp-ar-video")
 _context = None
 _context_lock = threading.Lock()
 
@@ -96,17 +103,24 @@ def info_from_dict(d: dict) -> SourceInfo:
 class _Child:
     """Everything that runs in the child process: a LiveEngine, its events sent up the pipe."""
 
-    def __init__(self, conn, spec: str, anchors_json: list, speed: float, loop: bool, playing: bool,
+    def __init__(self, conn, frames, spec: str, anchors_json: list, speed: float, loop: bool, playing: bool,
                  full_frames: bool, display_size):
         self.conn = conn
+        self.frames = frames  # the pipe of shared-memory frames (and their rings), read by the UI thread
+        self.frames_lock = threading.Lock()
         self.full_frames = full_frames
         self.ring: FrameRing | None = None
         self.rings: list[FrameRing] = []  # every ring made, unlinked when the child ends
         self.lock = threading.Lock()
         self.stop = threading.Event()
+        self._claim: tuple[int, np.ndarray] | None = None  # the ring slot the next display picture is written to
+        self._frozen = False  # gc.freeze() done after the first frame
         self.engine = LiveEngine(spec, anchors=parse_anchors(anchors_json), speed=speed, loop=loop,
-                                 playing=playing, display_size=display_size)
+                                 playing=playing, display_size=display_size,
+                                 display_buffer=None if full_frames else self.claim_slot)
         ev = self.engine.events
+        # each frame goes up from the processing thread as soon as it is made (no hop through another thread)
+        ev.ready.connect(self.send_ready)
         ev.opened.connect(lambda info: self.send(("opened", info_dict(info))))
         ev.error.connect(lambda title, message: self.send(("error", title, message)))
         ev.ended.connect(lambda: self.send(("ended",)))
@@ -122,6 +136,14 @@ class _Child:
             except (OSError, EOFError, BrokenPipeError):
                 self.stop.set()  # the UI is gone
 
+    def post(self, msg) -> None:
+        """Send a message of the frames pipe (a ring, or a frame in one)."""
+        with self.frames_lock:
+            try:
+                self.frames.send(msg)
+            except (OSError, EOFError, BrokenPipeError):
+                self.stop.set()
+
     def command_loop(self) -> None:
         while not self.stop.is_set():
             try:
@@ -135,7 +157,43 @@ class _Child:
             except Exception as exc:  # noqa: BLE001 - a bad setting is told to the user
                 self.send(("error", "Cannot apply the change", str(exc) or type(exc).__name__))
         self.stop.set()
-        self.engine.shown.wake()
+
+    def claim_slot(self, shape: tuple) -> np.ndarray | None:
+        """Processing thread: the shared-memory slot to write the next display picture into (in place: the
+        picture crosses to the UI without a copy), or None when the UI holds every slot (the frame is then
+        dropped in send_frame)."""
+        nbytes = int(np.prod(shape))
+        if self.ring is None or self.ring.slot_bytes < nbytes:
+            if self.ring is not None:
+                self._abandon()
+                try:
+                    self.ring.shm.close()  # the UI has its own mapping; the name is unlinked at the end
+                except BufferError:
+                    pass  # a picture made here still points into it; the mapping goes with the process
+            self.ring = FrameRing(nbytes)
+            self.rings.append(self.ring)
+            self.post(("ring", self.ring.name, self.ring.slot_bytes, self.ring.count))
+        self._abandon()
+        self._claim = self.ring.claim(shape)
+        return None if self._claim is None else self._claim[1]
+
+    def _abandon(self) -> None:
+        """A claimed slot whose picture was not sent (an error between): free again."""
+        if self._claim is not None:
+            self.ring.abandon(self._claim[0])
+            self._claim = None
+
+    def send_ready(self) -> None:
+        """Processing thread, after each frame: send the newest one up."""
+        shown = self.engine.take(timeout=0.0)
+        if shown is not None:
+            self.send_frame(shown)
+            if not self._frozen:
+                # the modules, model, tracker and GL objects alive after the first frame stay for good: out of
+                # the collector's reach, a full collection is a young-objects one (~50 ms less, now and then,
+                # in whichever frame it falls)
+                gc.freeze()
+                self._frozen = True
 
     def send_frame(self, shown) -> None:
         r = shown.result
@@ -149,38 +207,40 @@ class _Child:
                 "ambiguous": bool(r.extra.get("ambiguous", False))}   # a head-on marker's tilt undecided
         if not self.full_frames:
             # the picture goes through shared memory; the pipe carries the metadata and the slot's number
-            if self.ring is None or not self.ring.fits(bgra):
-                if self.ring is not None:
-                    self.ring.shm.close()  # the UI has its own mapping; the name is unlinked at the end
-                self.ring = FrameRing(bgra.nbytes)
-                self.rings.append(self.ring)
-                self.send(("ring", self.ring.name, self.ring.slot_bytes, self.ring.count))
-            slot = self.ring.write(bgra)
+            claim, self._claim = self._claim, None
+            if claim is not None and claim[1] is bgra:
+                slot = claim[0]  # written in place by the processing thread
+                self.ring.publish(slot)
+            else:
+                if claim is not None:
+                    self.ring.abandon(claim[0])
+                if self.ring is None or not self.ring.fits(bgra):
+                    self.claim_slot(bgra.shape)
+                    self._abandon()
+                slot = self.ring.write(bgra)
             if slot is None:
                 return  # the UI still holds every slot: this frame is dropped, a newer one follows
             meta["slot"], meta["dropped"] = slot, meta["dropped"] + self.ring.dropped
-            meta["send_at"] = time.perf_counter()
-            self.send(("frame", meta))
+            meta["stages"] = {**shown.stages, "sent": time.perf_counter()}
+            self.post(("frame", meta))
             return
         blobs = [memoryview(np.ascontiguousarray(bgra)).cast("B")]
         if self.full_frames:
             for img in (r.image, shown.frame):
                 meta.setdefault("full_shape", list(img.shape))
                 blobs.append(memoryview(np.ascontiguousarray(img)).cast("B"))
-        meta["send_at"] = time.perf_counter()
+        meta["stages"] = {**shown.stages, "sent": time.perf_counter()}
         self.send(("frame", meta), *blobs)
 
     def run(self) -> None:
         threading.Thread(target=self.command_loop, name="arapp-commands", daemon=True).start()
         engine = self.engine
         engine.start()
-        while not self.stop.is_set():
-            shown = engine.take(timeout=0.5)
-            if shown is None:
-                if not engine.running and engine.captured.peek() is None:
-                    break
-                continue
-            self.send_frame(shown)
+        reniced: set[int] = set()
+        while not self.stop.wait(0.5):
+            renice_background(reniced)
+            if not engine.running and engine.captured.peek() is None:
+                break
         engine.stop(wait=10.0)
 
     def close_rings(self) -> None:
@@ -192,16 +252,29 @@ class _Child:
         self.rings = []
 
 
-def child_main(conn, spec, anchors_json, speed, loop, playing, full_frames, display_size) -> None:
+def renice_background(done: set[int]) -> None:
+    """Lower the priority of this process's BACKGROUND_THREADS not yet in `done` (their native ids, added) by
+    BACKGROUND_NICE below the calling thread's."""
+    try:
+        nice = min(19, os.getpriority(os.PRIO_PROCESS, 0) + BACKGROUND_NICE)
+    except (OSError, AttributeError):
+        return
+    for t in threading.enumerate():
+        tid = t.native_id
+        if tid is None or tid in done or not t.name.startswith(BACKGROUND_THREADS):
+            continue
+        done.add(tid)
+        try:
+            os.setpriority(os.PRIO_PROCESS, tid, nice)  # Linux: one thread's niceness
+        except (OSError, AttributeError):
+            pass  # gone meanwhile, or a platform without per-thread niceness
+
+
+def child_main(conn, frames, spec, anchors_json, speed, loop, playing, full_frames, display_size) -> None:
     """Entry point of the child process."""
     child = None
     try:
-        try:
-            # the UI process comes first for the CPU: a frame late by a few ms costs less than a UI that stalls
-            os.nice(CHILD_NICE)
-        except OSError:
-            pass
-        child = _Child(conn, spec, anchors_json, speed, loop, playing, full_frames, display_size)
+        child = _Child(conn, frames, spec, anchors_json, speed, loop, playing, full_frames, display_size)
         child.run()
     except Exception as exc:  # noqa: BLE001 - last resort: tell the UI why the process ends
         try:
@@ -211,6 +284,7 @@ def child_main(conn, spec, anchors_json, speed, loop, playing, full_frames, disp
     finally:
         if child is not None:
             child.close_rings()
+        frames.close()
         conn.close()
 
 
@@ -248,6 +322,8 @@ class RemoteEngine(EngineSignals):
         self.display_size = None
         self.process = None
         self.conn = None
+        self._frames = None    # the frames pipe's reading end, watched by the UI thread's event loop
+        self._notifier: QSocketNotifier | None = None
         self._receiver = None
         self._ring: RingReader | None = None
         self._taken: Shown | None = None  # the frame the UI took last (shown now): its slot is held
@@ -259,23 +335,28 @@ class RemoteEngine(EngineSignals):
     def start(self) -> None:
         ctx = context()
         parent_conn, child_conn = ctx.Pipe(duplex=True)
-        self.conn = parent_conn
+        frames_in, frames_out = ctx.Pipe(duplex=False)
+        self.conn, self._frames = parent_conn, frames_in
         self.process = ctx.Process(target=child_main, name="arapp-pipeline", daemon=True,
-                                   args=(child_conn, self.spec, self.anchors_json, self.speed, self.loop,
-                                         self._playing, self.full_frames, self.display_size))
-        self._receiver = threading.Thread(target=self._receive, args=(child_conn,), name="arapp-receive",
-                                          daemon=True)
+                                   args=(child_conn, frames_out, self.spec, self.anchors_json, self.speed,
+                                         self.loop, self._playing, self.full_frames, self.display_size))
+        # the frames wake this (the UI) thread's event loop themselves: no hop through another thread
+        self._notifier = QSocketNotifier(frames_in.fileno(), QSocketNotifier.Type.Read, self)
+        self._notifier.activated.connect(self._frames_arrived)
+        self._receiver = threading.Thread(target=self._receive, args=(child_conn, frames_out),
+                                          name="arapp-receive", daemon=True)
         self._receiver.start()
 
-    def _receive(self, child_conn) -> None:
+    def _receive(self, child_conn, frames_out) -> None:
         """Receiver thread: start the child (the fork server may take a moment), then turn its messages
-        into slot items and signals."""
+        (all but the shared-memory frames) into slot items and signals."""
         try:
             self.process.start()
         except Exception as exc:  # noqa: BLE001
             self.error.emit("Cannot start the tracking process", str(exc))
             return
         child_conn.close()
+        frames_out.close()
         conn = self.conn
         while True:
             try:
@@ -314,7 +395,40 @@ class RemoteEngine(EngineSignals):
             shown.ring_slot = None
             held[0].release(held[1])
 
-    def _frame(self, conn, meta: dict) -> None:
+    def _frames_arrived(self, *_args) -> None:
+        """UI thread, the frames pipe readable: read every message waiting, then take the newest frame (the
+        ones before it are dropped and their slots freed at once)."""
+        frames = self._frames
+        got = False
+        try:
+            while frames is not None and frames.poll():
+                msg = frames.recv()
+                if msg[0] == "frame":
+                    self._frame(None, msg[1], notify=False)
+                    got = True
+                else:
+                    self._events[msg[0]](*msg[1:])
+        except (EOFError, OSError):
+            self._close_frames()  # the child has ended
+        if got:
+            self._notify()
+
+    def _close_frames(self) -> None:
+        if self._notifier is not None:
+            self._notifier.setEnabled(False)
+            self._notifier.deleteLater()
+            self._notifier = None
+        if self._frames is not None:
+            self._frames.close()
+            self._frames = None
+
+    def _notify(self) -> None:
+        # one notification at a time: the UI takes the newest frame, however many came meanwhile
+        if not self._notify_pending.is_set():
+            self._notify_pending.set()
+            self.frame_ready.emit()
+
+    def _frame(self, conn, meta: dict, notify: bool = True) -> None:
         w, h = meta["w"], meta["h"]
         held = None
         if "slot" in meta:
@@ -341,16 +455,15 @@ class RemoteEngine(EngineSignals):
             extra["ambiguous"] = True
         result = FrameResult(meta["index"], meta["t"], pose, meta["state"], meta["markers"], meta["inliers"],
                              meta["ms_track"], meta["ms_render"], image, extra)
+        # timing marks (perf_counter seconds, one clock for both processes on Linux): the child's, received
+        # here, taken by the UI thread (set in take)
+        stages = {**meta.get("stages", {}), "received": received}
         shown = Shown(result, bgra, frame, meta["captured_at"], meta["processed_at"],
-                      dropped_capture=meta["dropped"], qimage=q)
+                      dropped_capture=meta["dropped"], qimage=q, stages=stages)
         shown.ring_slot = held
-        # hand-over timing marks (perf_counter seconds, one clock for both processes on Linux):
-        # sent by the child, received here, taken by the UI thread (set in take)
-        shown.stages = {"sent": meta.get("send_at", received), "received": received}
         self._release(self.shown.replace(shown))  # a frame nobody took is dropped: its slot is free again
-        if not self._notify_pending.is_set():
-            self._notify_pending.set()
-            self.frame_ready.emit()
+        if notify:
+            self._notify()
 
     def send(self, command) -> None:
         """Send an arapp.app.commands command to the child (a model as its path and edits only)."""
@@ -373,6 +486,7 @@ class RemoteEngine(EngineSignals):
     def stop(self, wait: float = 0.0) -> None:
         self._stopping = True
         self.send(Stop())
+        self._close_frames()  # nothing more is shown
         if wait > 0 and self.process is not None:
             deadline = time.perf_counter() + wait
             if self._receiver is not None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import sys
 import threading
+import time
 from typing import Any, Callable
 
 import numpy as np
@@ -73,7 +74,10 @@ class Engine(EngineSignals, EngineFacade):
     def take(self) -> Shown | None:
         """The newest processed frame (None when nothing new); call from the UI thread on frame_ready."""
         self._notify_pending.clear()
-        return self.live.take()
+        shown = self.live.take()
+        if shown is not None:
+            shown.stages["taken"] = time.perf_counter()
+        return shown
 
 
 def make_engine(kind: str, spec: str, *, name: str, anchors: list, speed: float, loop: bool, handlers,
