@@ -42,11 +42,11 @@ def find_recording(width: int = 1280, height: int = 720) -> Path | None:
 
 
 def synth_recording(folder: Path, frames: int = 150) -> Path:
-    """A 1280x720 orbit around an ArUco board (tracking.anchors.render), written by tracking.recorder."""
+    """A 1280x720 orbit around an ArUco board (tracking.anchors.render), written by tracking.recording.writer."""
     from tracking.anchors.render import look_at, render_view
     from tracking.camera import Camera
-    from tracking.recorder import RecordingWriter
-    from tracking.session import parse_anchors
+    from tracking.recording.writer import RecordingWriter
+    from tracking.recording.schema import parse_anchors
 
     blocks = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
                "marker_length": 0.04, "separation": 0.01, "first_id": 0}]
@@ -65,8 +65,8 @@ def synth_recording(folder: Path, frames: int = 150) -> Path:
 def headless_fps(recording: Path, frames: int) -> float:
     """Frames per second of the bare pipeline loop (read, track, render), no GUI."""
     from arapp.geometry import load_model
-    from arapp.app.editing import display_placement
-    from arapp.pipeline import Pipeline
+    from arapp.engine.editing import display_placement
+    from arapp.engine.pipeline import Pipeline
     from tracking.sources import RecordingSource
 
     src = RecordingSource(recording, realtime=False, loop=True)
@@ -204,11 +204,11 @@ def naive_gui_run(recording: Path, seconds: float) -> dict:
 
     from arapp.geometry import load_model
     from arapp.gui.app import get_app
-    from arapp.app.editing import display_placement
+    from arapp.engine.editing import display_placement
     from arapp.gui.probe import BlockProbe
     from arapp.gui.view import VideoView
-    from arapp.gui.workers import bgr_qimage
-    from arapp.pipeline import Pipeline
+    from arapp.gui.hosts.local import bgr_qimage
+    from arapp.engine.pipeline import Pipeline
     from tracking.sources import RecordingSource
 
     get_app()
@@ -341,7 +341,7 @@ def run(quick: bool = False) -> str:
         "runs in parallel: on this shared 2-core machine that costs throughput. The numbers vary by 2x or more "
         "from run to run with the machine's load. Stage rows: medians per painted frame (they need not add up "
         "to the median latency); the shipped variant hands the picture over through shared memory "
-        "(arapp.gui.frame_ring: only a slot number crosses the pipe, the UI paints the slot in place); the "
+        "(arapp.gui.hosts.frame_ring: only a slot number crosses the pipe, the UI paints the slot in place); the "
         "peer has no waiting and no hand-over, its paint includes wrapping the frame as a QImage and scaling "
         "it in the paint.",
         "",

@@ -19,8 +19,8 @@ TIMEOUT_MS = 30000
 def recording(tmp_path_factory):
     from tracking.anchors.render import look_at, render_view
     from tracking.camera import Camera
-    from tracking.recorder import RecordingWriter
-    from tracking.session import parse_anchors
+    from tracking.recording.writer import RecordingWriter
+    from tracking.recording.schema import parse_anchors
 
     folder = tmp_path_factory.mktemp("marks") / "still"
     cam = Camera(np.array([[560.0, 0, 319.5], [0, 560.0, 239.5], [0, 0, 1]]), np.zeros(5), 640, 480)
@@ -116,7 +116,7 @@ def test_marks_only_for_markers_in_the_frame_and_none_without_detection():
     from tracking.anchors.model import build_models
     from tracking.anchors.render import look_at
     from tracking.camera import Camera
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
 
     anchors = parse_anchors([{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
                               "marker_length": 0.04, "separation": 0.01, "first_id": 0}])

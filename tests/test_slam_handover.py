@@ -19,7 +19,7 @@ import pytest
 
 from test_slam_start import _look
 from tracking.camera import Camera
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 from tracking.tracker import FLOW_DRIFT_M, Tracker
 
 K = np.array([[530.0, 0, 319.5], [0, 530.0, 239.5], [0, 0, 1]])

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from arapp.placement import world_from_model
+from arapp.geometry.placement import world_from_model
 from arapp.render.modes import SURFACE_ALPHA
 from tracking.anchors.model import build_models
 
@@ -33,7 +33,7 @@ PIECE_PX = 2.0  # a mark's line is tested against the silhouette every this many
 
 def model_world_vertices(model, mesh, placement, anchor) -> np.ndarray:
     """The display mesh's vertices in the world (metres) with `model` placed at `placement` on `anchor`
-    (as the pipeline places it: arapp.placement.world_from_model)."""
+    (as the pipeline places it: arapp.geometry.placement.world_from_model)."""
     placed = copy.copy(model)
     placed.placement = placement
     T = world_from_model(anchor, placed)

@@ -41,8 +41,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from arapp.app.events import Events
-from arapp.placement import Placement, world_from_placement
+from arapp.engine.events import Events
+from arapp.geometry.placement import Placement, world_from_placement
 
 # (elevation from, to (degrees), azimuth cells): 12 + 12 + 9 + 6 + 1 = 40 cells of roughly equal solid angle
 RINGS = ((0.0, 20.0, 12), (20.0, 40.0, 12), (40.0, 60.0, 9), (60.0, 80.0, 6), (80.0, 90.0, 1))
@@ -408,8 +408,8 @@ class ScanSession:
 
     def _reconstruct_job(self, views, camera, anchors, progress, cancel):
         """Worker thread: pipeline -> mesh in the placement frame (mm) -> PLY file -> loaded model."""
-        from arapp.app.editing import model_mesh
-        from arapp.pipeline import load_display_model
+        from arapp.engine.editing import model_mesh
+        from arapp.engine.pipeline import load_display_model
         from arapp.scan.pipeline import ScanOptions, scan, write_mesh
 
         st = self.settings

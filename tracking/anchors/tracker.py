@@ -21,7 +21,7 @@ from tracking.anchors.pose import planar_solutions, project, project_pixels, res
 from tracking.anchors.qr import QRTracking
 from tracking.camera import Camera
 from tracking.poses import from_rvec_tvec, invert, rotation_angle, transform_points
-from tracking.session import AnchorSpec
+from tracking.anchors.kinds import AnchorSpec
 
 
 @dataclass

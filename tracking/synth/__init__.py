@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 from typing import Callable
 
-from tracking.session import Session
+from tracking.recording.schema import Session
 
 __all__ = ["synthesize", "scene_from_arg"]
 
@@ -37,7 +37,7 @@ def synthesize(scene, out: str | Path, force: bool = False, max_frames: int | No
     (source kind `synthetic` with the scene itself) and groundtruth.tum
     (world_from_camera of every frame, OpenCV camera axes).
     """
-    from tracking.recorder import RecordingWriter
+    from tracking.recording.writer import RecordingWriter
     from tracking.synth.held import make_renderer
 
     renderer = make_renderer(scene)
