@@ -112,7 +112,7 @@ def check_octoprint(url: str, api_key: str, timeout_s: float = 5.0) -> CheckResu
 
 def check_moonraker(url: str, api_key: str | None = None, timeout_s: float = 5.0) -> CheckResult:
     """Ask Moonraker at `url` for its version and whether Klipper is ready (no key: a trusted client)."""
-    from arapp.printing.link.moonraker import check_moonraker as check
+    from arapp.printing.link.moonraker import check_moonraker as check  # the Moonraker link: only when checked
 
     ok, summary, details = check(url, api_key or None, timeout_s)
     return CheckResult(ok, summary, details)

@@ -19,8 +19,8 @@ __all__ = ["synthesize", "scene_from_arg"]
 
 def scene_from_arg(arg: str):
     """A Scene from a preset name or a scene JSON file path."""
-    from tracking.synth.presets import EXTRA_TUNING, HELD, PRESETS, preset
-    from tracking.synth.scene import load_scene, parse_scene
+    from tracking.synth.presets import EXTRA_TUNING, HELD, PRESETS, preset  # the scene tables: only when asked
+    from tracking.synth.scene import load_scene, parse_scene  # (keeps `import tracking.synth` light)
 
     if arg in PRESETS or arg in EXTRA_TUNING or arg in HELD:
         return parse_scene(preset(arg), f"preset {arg}")
@@ -37,8 +37,8 @@ def synthesize(scene, out: str | Path, force: bool = False, max_frames: int | No
     (source kind `synthetic` with the scene itself) and groundtruth.tum
     (world_from_camera of every frame, OpenCV camera axes).
     """
-    from tracking.recording.writer import RecordingWriter
-    from tracking.synth.held import make_renderer
+    from tracking.recording.writer import RecordingWriter  # the writer and the renderer (scipy, the scene code)
+    from tracking.synth.held import make_renderer  # load only when a recording is made, not for `arapp --help`
 
     renderer = make_renderer(scene)
     n = scene.frame_count if max_frames is None else min(max_frames, scene.frame_count)

@@ -16,6 +16,8 @@ import copy
 
 import numpy as np
 
+from tracking.errors import SessionError
+
 BOARD = {"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
          "marker_length": 0.04, "separation": 0.01, "first_id": 0}
 MILD_DIST = [-0.08, 0.04, 0.0005, -0.0005, 0.0]
@@ -365,8 +367,6 @@ def preset(name: str) -> dict:
     """A copy of the named preset's scene dict (a bundled recording's, or an extra tuning scene's)."""
     found = PRESETS.get(name) or EXTRA_TUNING.get(name) or HELD.get(name)
     if found is None:
-        from tracking.errors import SessionError
-
         raise SessionError(f"no synthetic preset {name!r}; presets: {', '.join([*PRESETS, *EXTRA_TUNING, *HELD])} "
                            "(or a scene JSON file)")
     return copy.deepcopy(found)

@@ -32,6 +32,7 @@ from PySide6.QtWidgets import (
 )
 
 from arapp.store import user_config
+from arapp.gui.print.bed_anchor_dialog import BedAnchorDialog
 from arapp.gui.tasks import Task
 from arapp.printing import connection_check as cc
 from arapp.printing.link.webapi import ApiKeyError
@@ -209,8 +210,6 @@ class PrinterSetupDialog(QDialog):
 
     def edit_bed_anchor(self) -> None:
         """The bed marker dialog for the printer chosen; a preset becomes a profile file in the config folder."""
-        from arapp.gui.print.bed_anchor_dialog import BedAnchorDialog
-
         choice = self.profile.currentData()
         if not isinstance(choice, str) or choice == "file":
             return
