@@ -54,7 +54,7 @@ class Pipeline:
         anchors: list[AnchorSpec],
         *,
         model=None,
-        placement: Placement | dict | None = None,
+        placement: Placement | None = None,
         mode: str = "shaded",
         slam: bool = True,
         draw: bool = True,
@@ -80,18 +80,17 @@ class Pipeline:
             self.set_model(model, placement)
 
     # -- configuration -------------------------------------------------------------
-    def set_model(self, model, placement: Placement | dict | None = None) -> None:
+    def set_model(self, model, placement: Placement | None = None) -> None:
         """Show `model` (an arapp.geometry Model) placed on the world anchor; None hides it.
 
-        placement: replaces the model's own placement (a dict may give only some of
-        size_mm, offset, rotation_deg; the rest stays the model's).
+        placement: replaces the model's own placement (None keeps it).
         """
         self.model = model
         if model is None:
             self.mesh = None
             return
         if placement is not None:
-            model.placement = Placement.from_any(placement, model.placement)
+            model.placement = placement
         self.mesh = model.mesh()
         self.lines = model.lines() if hasattr(model, "lines") else None
         self.color = getattr(model, "color", None)

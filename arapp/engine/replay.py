@@ -20,6 +20,7 @@ import numpy as np
 
 from arapp.engine.input_source import open_input
 from arapp.engine.pipeline import Pipeline, load_display_model
+from arapp.geometry.placement import Placement
 from arapp.engine.toolpath_overlay import toolpath_overlay
 from tracking.evaluation import evaluate
 from tracking.poses import read_tum, tum_line
@@ -28,7 +29,7 @@ from tracking.poses import read_tum, tum_line
 @dataclass
 class ReplayOptions:
     model: str | None = None
-    placement: dict | None = None
+    placement: dict | None = None  # some of size_mm, offset, rotation_deg; the rest stays the model's
     mode: str = "shaded"
     video: bool = True
     slam: bool = True
@@ -60,7 +61,9 @@ def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | 
     source, camera, anchors = opened.source, opened.camera, opened.anchors
     for line in opened.notes if say is not None else ():
         say(line)
-    pipeline = Pipeline(camera, anchors, model=model, placement=options.placement, mode=options.mode,
+    # the options' placement dict becomes the model's Placement here, once
+    placement = Placement.from_any(options.placement, model.placement) if model is not None else None
+    pipeline = Pipeline(camera, anchors, model=model, placement=placement, mode=options.mode,
                         slam=options.slam, draw=options.video, tracker_params=options.tracker_params)
     if options.toolpaths:
         line_sets, world_from_bed = toolpath_overlay(options.toolpaths, options.printer, anchors, options.layer)
