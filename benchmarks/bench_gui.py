@@ -42,11 +42,11 @@ def find_recording(width: int = 1280, height: int = 720) -> Path | None:
 
 
 def synth_recording(folder: Path, frames: int = 150) -> Path:
-    """A 1280x720 orbit around an ArUco board (tracking.anchors.render), written by tracking.recorder."""
+    """A 1280x720 orbit around an ArUco board (tracking.anchors.render), written by tracking.recording.writer."""
     from tracking.anchors.render import look_at, render_view
     from tracking.camera import Camera
-    from tracking.recorder import RecordingWriter
-    from tracking.session import parse_anchors
+    from tracking.recording.writer import RecordingWriter
+    from tracking.recording.schema import parse_anchors
 
     blocks = [{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
                "marker_length": 0.04, "separation": 0.01, "first_id": 0}]
@@ -65,8 +65,8 @@ def synth_recording(folder: Path, frames: int = 150) -> Path:
 def headless_fps(recording: Path, frames: int) -> float:
     """Frames per second of the bare pipeline loop (read, track, render), no GUI."""
     from arapp.geometry import load_model
-    from arapp.app.editing import display_placement
-    from arapp.pipeline import Pipeline
+    from arapp.engine.editing import display_placement
+    from arapp.engine.pipeline import Pipeline
     from tracking.sources import RecordingSource
 
     src = RecordingSource(recording, realtime=False, loop=True)
@@ -203,11 +203,11 @@ def naive_gui_run(recording: Path, seconds: float) -> dict:
 
     from arapp.geometry import load_model
     from arapp.gui.app import get_app
-    from arapp.app.editing import display_placement
+    from arapp.engine.editing import display_placement
     from arapp.gui.probe import BlockProbe
     from arapp.gui.view import VideoView
-    from arapp.gui.workers import bgr_qimage
-    from arapp.pipeline import Pipeline
+    from arapp.gui.hosts.local import bgr_qimage
+    from arapp.engine.pipeline import Pipeline
     from tracking.sources import RecordingSource
 
     get_app()
@@ -349,8 +349,8 @@ def run(quick: bool = False) -> str:
         "from run to run with the machine's load. Stage rows: each painted frame's latency is split into "
         "stages that add up to it, and each row gives that stage's median (the medians need not add up to the "
         "median latency). The shipped variant's processing thread writes the display picture straight into "
-        "shared memory and sends its slot number on a pipe that wakes the UI thread (arapp.gui.frame_ring, "
-        "arapp.gui.remote); the app draws the marker marks (View > Show detected markers, on by default) in "
+        "shared memory and sends its slot number on a pipe that wakes the UI thread (arapp.gui.hosts.frame_ring, "
+        "arapp.gui.hosts.remote); the app draws the marker marks (View > Show detected markers, on by default) in "
         "its display stage, the peer draws none; the peer has no waiting and no hand-over, its display stage "
         "wraps the composite as a QImage and its paint scales it (Qt, smooth).",
         "",

@@ -48,7 +48,7 @@ def frames_of(folder: Path):
 
 def make_scene(set_name: str, out: Path) -> tuple[Path, dict]:
     """Track the set's mapping session and save its scene file to `out`; (path, facts)."""
-    from arapp.scene_session import SceneRun
+    from arapp.engine.scene_run import SceneRun
     from tracking.fusion import Tracker
 
     frames, session = frames_of(recording(f"{set_name}_map"))
@@ -74,7 +74,7 @@ def make_scene(set_name: str, out: Path) -> tuple[Path, dict]:
 def run_revisit(scene_path: Path | None, name: str) -> dict:
     """Start a fresh tracker on `scene_path` (None: without a scene, the baseline) and track the revisit
     `name`; the figures of one revisit."""
-    from arapp.scene_session import SceneRun
+    from arapp.engine.scene_run import SceneRun
     from tracking.poses import rotation_angle
     from tracking.fusion import Tracker
 
@@ -117,7 +117,7 @@ def run_revisit(scene_path: Path | None, name: str) -> dict:
 def chain(scene_path: Path, names: list[str]) -> list[tuple[int, int]]:
     """Each revisit in turn extends the scene file (loaded, tracked, saved over it): (keyframes, bytes) after
     each save, to show the file's growth is bounded (keyframe culling)."""
-    from arapp.scene_session import SceneRun
+    from arapp.engine.scene_run import SceneRun
     from tracking.fusion import Tracker
 
     out = []

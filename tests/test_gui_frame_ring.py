@@ -1,5 +1,5 @@
 """The shared-memory hand-over of display frames from the pipeline child process to the UI
-(arapp.gui.frame_ring, arapp.gui.remote): frames arrive intact, a frame nobody took is dropped and its
+(arapp.gui.hosts.frame_ring, arapp.gui.hosts.remote): frames arrive intact, a frame nobody took is dropped and its
 slot freed, and no /dev/shm segment outlives a stop or a killed child."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from arapp.gui.frame_ring import FrameRing, RingReader
+from arapp.gui.hosts.frame_ring import FrameRing, RingReader
 
 SHAPE = (90, 160, 4)
 
@@ -120,7 +120,7 @@ def test_background_threads_of_the_pipeline_process_are_niced_and_the_rest_not()
     processing threads keep the process's priority; read back from /proc, not from the code under test."""
     import threading
 
-    from arapp.gui.remote import BACKGROUND_NICE, renice_background
+    from arapp.gui.hosts.remote import BACKGROUND_NICE, renice_background
 
     def nice_of(tid: int) -> int:
         return int(Path(f"/proc/self/task/{tid}/stat").read_text().rsplit(")", 1)[1].split()[16])
@@ -142,7 +142,7 @@ def test_background_threads_of_the_pipeline_process_are_niced_and_the_rest_not()
 
 
 def _meta(i: int, slot: int) -> dict:
-    from arapp.gui.remote import STATE_KEYS
+    from arapp.gui.hosts.remote import STATE_KEYS
 
     return {"index": i, "t": i / 30.0, "state": "lost", "markers": 0, "inliers": 0, "ms_track": 1.0,
             "ms_render": 1.0, "pose": None, "captured_at": 0.0, "processed_at": 0.0, "dropped": 0,
@@ -150,7 +150,7 @@ def _meta(i: int, slot: int) -> dict:
 
 
 def test_remote_engine_drops_stale_frames_and_frees_their_slots(qtbot):
-    from arapp.gui.remote import RemoteEngine
+    from arapp.gui.hosts.remote import RemoteEngine
 
     ring = FrameRing(int(np.prod(SHAPE)), count=4)
     try:
@@ -182,7 +182,7 @@ def test_remote_engine_drops_stale_frames_and_frees_their_slots(qtbot):
 def test_a_real_child_leaves_no_segment_behind(qtbot, tmp_path, ending):
     from gui_helpers import ANCHORS, TIMEOUT_MS, write_arc_recording
 
-    from arapp.gui.remote import RemoteEngine
+    from arapp.gui.hosts.remote import RemoteEngine
 
     before = set(os.listdir("/dev/shm"))
     rec = write_arc_recording(tmp_path / "arc", n=6)

@@ -20,8 +20,8 @@ TIMEOUT_MS = 30000
 def recording(tmp_path_factory):
     from tracking.anchors.render import look_at, render_view
     from tracking.camera import Camera
-    from tracking.recorder import RecordingWriter
-    from tracking.session import parse_anchors
+    from tracking.recording.writer import RecordingWriter
+    from tracking.recording.schema import parse_anchors
 
     folder = tmp_path_factory.mktemp("marks") / "still"
     cam = Camera(np.array([[560.0, 0, 319.5], [0, 560.0, 239.5], [0, 0, 1]]), np.zeros(5), 640, 480)
@@ -82,7 +82,7 @@ def set_marks(qtbot, window, on: bool) -> np.ndarray:
 
 @pytest.mark.parametrize("engine", ["threads", "process"])
 def test_detected_marker_outlined_when_on_and_not_when_off(qtbot, window, recording, engine):
-    from arapp.app.overlay_marks import marker_marks
+    from arapp.engine.overlay_marks import marker_marks
 
     window.engine_kind = engine  # the in-process engine, and the shipped child-process one
     assert window.marker_marks_action.isChecked()  # default on
@@ -124,11 +124,11 @@ def test_detected_marker_outlined_when_on_and_not_when_off(qtbot, window, record
 def test_marks_only_for_markers_in_the_frame_and_none_without_detection():
     """Headless: a board seen so that its right column leaves the frame gets outlines for the markers
     wholly inside only (checked with cv2.projectPoints); no marker detected, or no pose: nothing."""
-    from arapp.app.overlay_marks import marker_marks
+    from arapp.engine.overlay_marks import marker_marks
     from tracking.anchors.model import build_models
     from tracking.anchors.render import look_at
     from tracking.camera import Camera
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
 
     anchors = parse_anchors([{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
                               "marker_length": 0.04, "separation": 0.01, "first_id": 0}])
@@ -191,7 +191,7 @@ def test_marks_are_drawn_at_the_views_scale_and_under_the_model_as_the_mode_lets
     from the frame on the right half). In a picture at half the frame's size the line lands at half the
     frame position, OUTLINE_PX wide; where the model is, shaded keeps the model's pixels and a see-through
     mode mixes in `under` of the outline's colour (the rule under_opacity states)."""
-    from arapp.app.overlay_marks import OUTLINE_RGB, MarkerMarks, draw_marks, under_opacity
+    from arapp.engine.overlay_marks import OUTLINE_RGB, MarkerMarks, draw_marks, under_opacity
 
     frame = np.full((200, 400, 3), 90, np.uint8)
     composite = frame.copy()

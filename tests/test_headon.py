@@ -68,8 +68,8 @@ def test_undecided_at_first_decided_later(runs):
 
 
 def test_ambiguous_hint_shows_while_tracked_and_undecided(qtbot):
-    from arapp.guidance import ambiguous_hint
-    from arapp.gui.welcome import LostHint
+    from arapp.app.guidance import ambiguous_hint
+    from arapp.gui.first_hour.welcome import LostHint
 
     hint = LostHint(delay_s=1.0)
     qtbot.addWidget(hint)

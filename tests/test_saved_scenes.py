@@ -187,7 +187,7 @@ def test_a_failed_save_leaves_the_old_file_and_no_temporary(tmp_path, monkeypatc
 @pytest.fixture(scope="module")
 def saved_desk(tmp_path_factory):
     """The test set's mapping session tracked and saved as a scene file (the first session)."""
-    from arapp.scene_session import SceneRun
+    from arapp.engine.scene_run import SceneRun
     from scenes import load_recording
     from tracking.synth.revisits import revisit_folder
     from tracking.fusion import Tracker
@@ -205,7 +205,7 @@ def saved_desk(tmp_path_factory):
 
 
 def _revisit(name: str, scene_path, frames: int = 12):
-    from arapp.scene_session import SceneRun
+    from arapp.engine.scene_run import SceneRun
     from scenes import load_recording
     from tracking.synth.revisits import revisit_folder
     from tracking.fusion import Tracker
@@ -258,7 +258,7 @@ def test_with_the_marker_the_saved_map_agrees_with_it_and_a_run_extends_the_scen
 def test_a_moved_marker_is_reported(saved_desk, tmp_path):
     """The scene's anchor says the world is 3 cm off: the map (saved before the move) disagrees with the
     marker by about that much, and the run says so."""
-    from arapp.scene_session import SceneRun
+    from arapp.engine.scene_run import SceneRun
     from scenes import load_recording
     from tracking.synth.revisits import revisit_folder
     from tracking.fusion import Tracker
@@ -284,11 +284,11 @@ def test_a_moved_marker_is_reported(saved_desk, tmp_path):
 
 
 def test_a_scene_of_another_world_anchor_is_refused(saved_desk):
-    from arapp.scene_session import SceneRun
+    from arapp.engine.scene_run import SceneRun
     from tracking.fusion import Tracker
 
     other = [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 3, "length": 0.05}]
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
 
     with Tracker(camera(read_scene(saved_desk).camera.K[0, 0]), parse_anchors(other), slam=True) as tr:
         with pytest.raises(SceneError, match="another world anchor"):
@@ -300,7 +300,7 @@ def test_gui_tracks_against_a_scene_without_the_marker_and_saves_it_on_request(q
     """`arapp gui --scene` as run_gui does it: the scene opened, then the source; the first poses come from
     the map (no marker on the desk) where ground truth puts the camera; File > Save scene writes the file
     (history grows by one) and the last scene is remembered for File > Reopen last scene."""
-    from arapp import user_config
+    from arapp.store import user_config
     from tracking.poses import read_tum
     from tracking.synth.revisits import revisit_folder
 

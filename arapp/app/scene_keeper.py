@@ -1,5 +1,5 @@
 """The app model's saved scene: which scene file the session tracks against, opening and saving it, and the
-last one used (remembered per user, arapp.user_config, to offer reopening it). No Qt.
+last one used (remembered per user, arapp.store.user_config, to offer reopening it). No Qt.
 
     keeper = SceneKeeper(session)
     keeper.open("desk.arscene")     # its map goes to the engine (now and for each source opened later),
@@ -14,10 +14,10 @@ import json
 from dataclasses import asdict
 from pathlib import Path
 
-from arapp import user_config
-from arapp.app.scene_commands import LoadScene, SaveScene
+from arapp.store import user_config
+from arapp.engine.scene_commands import LoadScene, SaveScene
 from arapp.exchange.scene import SUFFIX, SceneError, read_scene_models
-from arapp.placement import Placement
+from arapp.geometry.placement import Placement
 
 LAST_KEY = "last_scene"
 

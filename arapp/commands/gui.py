@@ -44,7 +44,7 @@ def run(args):
             raise ValueError(f"two calibrations: {spec.calibration} in --source and --calibration {calibration}; give one")
         source = format_spec(spec.scheme, spec.target, calibration)
     if getattr(args, "anchors", None):
-        from tracking.session import parse_anchors, read_anchor_blocks
+        from tracking.recording.schema import parse_anchors, read_anchor_blocks
 
         anchors = read_anchor_blocks(args.anchors)
         parse_anchors(anchors, where=f"{args.anchors}: anchors")  # refused here, in one line
@@ -57,7 +57,7 @@ def run(args):
 
         if not Path(toolpaths).is_file():
             raise ValueError(f"--toolpaths {toolpaths}: no such file; slice a model first (arapp slice MODEL -o FILE)")
-        from arapp.app.toolpaths import ToolpathBuilder
+        from arapp.engine.toolpaths import ToolpathBuilder
 
         ToolpathBuilder().profile(printer)  # a missing profile or bed anchor: say so now, not in a dialog
     scene = getattr(args, "scene", None)

@@ -50,8 +50,8 @@ def check_args(args) -> None:
 
 def run(args):
     from arapp.exchange.staging import staged_folder
-    from arapp.geometry.model import check_size_mm
-    from arapp.replay import ReplayOptions, replay, terminal_progress
+    from arapp.geometry.placement import check_size_mm
+    from arapp.engine.replay import ReplayOptions, replay, terminal_progress
 
     check_args(args)
     if (args.scene or args.save_scene) and args.no_slam:
@@ -85,10 +85,10 @@ def run(args):
 
 
 def say_why_untracked(args, report) -> None:
-    """A replay that tracked nothing says why, and what the video shows instead (arapp/untracked.py)."""
+    """A replay that tracked nothing says why, and what the video shows instead (arapp/engine/untracked.py)."""
     if not report.get("frames") or report.get("tracked_fraction"):
         return
-    from arapp.untracked import untracked_lines_for  # discovery's detectors: only for a replay that needs them
+    from arapp.engine.untracked import untracked_lines_for  # discovery's detectors: only for a replay that needs them
 
     for line in untracked_lines_for(args.recording, args.calibration, args.anchors):
         print(f"replay: {line}")

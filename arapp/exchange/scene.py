@@ -28,7 +28,7 @@ import numpy as np
 
 from tracking.camera import Camera
 from tracking.errors import CalibrationError, SessionError
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 from tracking.slam.map import Map
 from tracking.slam.map_io import ARRAYS, MapError, cull_keyframes, map_from_arrays, map_to_arrays
 

@@ -9,9 +9,9 @@ from pathlib import Path
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QApplication
 
-from arapp.app.toolpaths import preview_spec
+from arapp.engine.toolpaths import preview_spec
 from arapp.gui.main_window import MainWindow
-from arapp.gui.remote import warm_up
+from arapp.gui.hosts.remote import warm_up
 
 
 def ensure_platform() -> None:

@@ -10,7 +10,7 @@ from tracking.anchors.dictionaries import aruco_dictionary
 from tracking.anchors.model import build_models, square_corners
 from tracking.camera import Camera
 from tracking.poses import from_rvec_tvec, invert
-from tracking.session import AnchorSpec
+from tracking.anchors.kinds import AnchorSpec
 
 
 def to_gray(image: np.ndarray) -> np.ndarray:

@@ -23,7 +23,7 @@ from tracking.anchors.qr import QRTracking
 from tracking.anchors.result import AnchorResult
 from tracking.camera import Camera
 from tracking.poses import invert, rotation_angle, transform_points
-from tracking.session import AnchorSpec
+from tracking.anchors.kinds import AnchorSpec
 
 
 class AnchorTracker:

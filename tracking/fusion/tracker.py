@@ -65,7 +65,7 @@ from tracking.fusion.keyframes import Keyframes
 from tracking.fusion.moving import MovingAnchors
 from tracking.fusion.output import Output
 from tracking.fusion.state import AnchorMemory, FrameState, TrackResult, TrackStatus
-from tracking.session import AnchorSpec
+from tracking.anchors.kinds import AnchorSpec
 from tracking.slam.features import FeatureExtractor, Features
 from tracking.slam.flow import relift
 from tracking.slam.frame_pose import MotionModel

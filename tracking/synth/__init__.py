@@ -12,13 +12,14 @@ import json
 from pathlib import Path
 from typing import Callable
 
-from tracking.session import Session
+from tracking.recording.schema import Session
 
 __all__ = ["synthesize", "scene_from_arg"]
 
 
 def scene_from_arg(arg: str):
     """A Scene from a preset name or a scene JSON file path."""
+    # the scene tables: only when asked (keeps `import tracking.synth` light)
     from tracking.synth.presets import EXTRA_TUNING, HEADON, HELD, OCCLUSION, PRESETS, preset
     from tracking.synth.revisits import revisit_by_name
     from tracking.synth.scene import load_scene, parse_scene
@@ -42,8 +43,8 @@ def synthesize(scene, out: str | Path, force: bool = False, max_frames: int | No
     depth/ (the simulated depth camera), occlusion/ (ground-truth masks) and occlusion.json
     (tracking.synth.occlusion).
     """
-    from tracking.recorder import RecordingWriter
-    from tracking.synth.held import make_renderer
+    from tracking.recording.writer import RecordingWriter  # the writer and the renderer (scipy, the scene code)
+    from tracking.synth.held import make_renderer  # load only when a recording is made, not for `arapp --help`
 
     if getattr(scene, "occlusion", None):
         from tracking.synth.occlusion import OcclusionRenderer, write_extras, write_mask

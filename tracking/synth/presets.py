@@ -16,6 +16,8 @@ import copy
 
 import numpy as np
 
+from tracking.errors import SessionError
+
 BOARD = {"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
          "marker_length": 0.04, "separation": 0.01, "first_id": 0}
 MILD_DIST = [-0.08, 0.04, 0.0005, -0.0005, 0.0]
@@ -366,8 +368,6 @@ def preset(name: str) -> dict:
     found = (PRESETS.get(name) or EXTRA_TUNING.get(name) or HELD.get(name) or OCCLUSION.get(name)
              or HEADON.get(name))
     if found is None:
-        from tracking.errors import SessionError
-
         raise SessionError(f"no synthetic preset {name!r}; presets: "
                            f"{', '.join([*PRESETS, *EXTRA_TUNING, *HELD, *OCCLUSION, *HEADON])} "
                            "(or a scene JSON file)")

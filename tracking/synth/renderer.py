@@ -13,6 +13,8 @@ averaged down with INTER_AREA, which keeps OpenCV's pixel-centre convention
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -24,9 +26,11 @@ from tracking.synth.camera_effects import (AutoExposure, chroma_subsample_422, d
                                            white_balance_gains)
 from tracking.synth.hand import hand_polygons, smooth_presence
 from tracking.synth.patterns import pattern_for
-from tracking.synth.scene import Scene
 from tracking.synth.texture import make_desk_texture
 from tracking.synth.trajectory import make_trajectory
+
+if TYPE_CHECKING:  # annotations only: scene.py imports held.py, which imports this module
+    from tracking.synth.scene import Scene
 
 PAPER_BGR = np.array([228.0, 232.0, 234.0], np.float32)
 INK_BGR = np.array([26.0, 24.0, 24.0], np.float32)

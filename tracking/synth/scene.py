@@ -44,7 +44,9 @@ from tracking.camera import Camera
 from tracking.errors import CalibrationError, SessionError
 from tracking.jsonfile import read_json
 from tracking.poses import invert
-from tracking.session import AnchorSpec, parse_anchors
+from tracking.anchors.kinds import AnchorSpec
+from tracking.recording.schema import parse_anchors
+from tracking.synth.held import check_held
 from tracking.synth.patterns import pattern_for
 from tracking.synth.texture import STYLES
 from tracking.synth.trajectory import make_trajectory
@@ -231,8 +233,6 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
                                "(effects.rolling_shutter and effects.motion_blur 0)")
         check_occlusion(scene.occlusion, f"{where}.occlusion")
     if scene.held is not None:
-        from tracking.synth.held import check_held
-
         check_held(scene.held, effects.get("rolling_shutter"), f"{where}.held")
 
     make_trajectory(scene.trajectory, scene.duration, scene.seed, f"{where}.trajectory")  # validate now
