@@ -349,7 +349,8 @@ def test_replay_saves_a_scene_then_starts_from_it_and_refuses_a_bad_one_in_one_l
     report = json.loads((out / "report.json").read_text())["scene"]
     assert report["first_pose_s"] == 0.0 and report["first_pose_state"] == "slam"
     after = read_scene(tmp_path / "after.arscene")
-    assert after.models[0]["placement"] == {"size_mm": 33.0} and len(after.history) == 2
+    assert after.models[0]["placement"] == {"size_mm": 33.0, "offset": [0.0, 0.0, 0.0], "rotation_deg": [0.0, 0.0, 0.0]}
+    assert len(after.history) == 2
     assert "saved scene" in capsys.readouterr().out
     bad = tmp_path / "bad.arscene"
     bad.write_bytes(b"PK\x03\x04 truncated")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -154,7 +154,8 @@ def _start_scene(pipeline: Pipeline, camera, anchors, options: ReplayOptions, sa
         say(f"scene {options.scene}: {s['loaded_keyframes']} keyframes, {s['loaded_points']} map points")
     if options.scene and options.model is None and run.models:
         entry = run.models[0]
-        pipeline.set_model(load_display_model(entry["path"]), entry.get("placement") or None)
+        model = load_display_model(entry["path"])
+        pipeline.set_model(model, Placement.from_any(entry.get("placement") or None, model.placement))
         options.model, options.placement = entry["path"], entry.get("placement") or None
     return run
 
@@ -163,7 +164,10 @@ def _save_scene(run, pipeline: Pipeline, options: ReplayOptions, say) -> dict | 
     """Write `options.save_scene` (the map as the run left it, the model and placement shown)."""
     if not options.save_scene:
         return None
-    models = [{"path": str(options.model), "placement": dict(options.placement or {})}] if options.model else []
+    # the placement shown (the model file's, with the options' or the scene's keys over it)
+    shown = pipeline.model.placement if pipeline.model is not None else None
+    models = ([{"path": str(options.model), "placement": asdict(shown) if shown is not None else {}}]
+              if options.model else [])
     path = run.save(options.save_scene, models)
     m = pipeline.tracker.map
     if say is not None:
