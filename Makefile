@@ -25,7 +25,7 @@ export PYOPENGL_PLATFORM ?= egl
 export QT_QPA_PLATFORM ?= offscreen
 export MPLBACKEND ?= Agg
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test bench recordings clean
 
 setup: $(STAMP) $(SERVER_STAMPS)
 
@@ -74,8 +74,13 @@ demo: $(STAMP)
 test: $(STAMP) $(SERVER_STAMPS)
 	$(VENV)/bin/lint-imports --no-cache && $(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile tests
 
+# Every synthetic preset's recording: the bundled ones in recordings/, the rest rendered once into the recordings
+# cache (.cache/recordings/, see recordings/README.md). Tests and benchmarks render what they need on first use.
+recordings: $(STAMP)
+	$(ARAPP) synth all --cached
+
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py --out BENCHMARKS.md $(if $(ONLY),--only $(ONLY) --merge)
 
 clean:
-	rm -rf $(VENV) $(OCTO) $(MOON) $(KLIPPY) $(PRUSALINK) .prusalink-test out
+	rm -rf $(VENV) $(OCTO) $(MOON) $(KLIPPY) $(PRUSALINK) .prusalink-test out .cache/recordings

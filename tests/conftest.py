@@ -48,5 +48,40 @@ def threads_window(qtbot, tmp_path, config_dir, monkeypatch):
     close_main_window(w)
 
 
+# Synthetic recordings the repository does not bundle are rendered on first use into the recordings cache
+# (tracking/synth/cache.py), each once per run under a file lock. test_synth_recordings.py checks every preset,
+# and loadfile scheduling hands it out late (collection order): rendered there, one after another, the ~2 min
+# of rendering on a fresh checkout would be the run's tail. So when the parallel run holds that file, the
+# controller renders the missing ones in a background process from the start (those read by early test files
+# first); a worker that needs one meanwhile waits on its lock or renders it itself, never twice.
+_prefetch = None
+EARLY_RECORDINGS = ["marker_occluded", "test_webcam_board"]
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_node_collection_finished(node, ids):
+    global _prefetch
+    if _prefetch is not None or not any("test_synth_recordings.py::" in i for i in ids):
+        return
+    import subprocess
+    import sys
+
+    from tracking.synth.cache import bundled_folder
+    from tracking.synth.presets import HELD, PRESETS
+
+    names = [n for n in dict.fromkeys([*EARLY_RECORDINGS, *HELD, *PRESETS]) if bundled_folder(n) is None]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])}
+    _prefetch = subprocess.Popen(
+        [sys.executable, "-c", "import sys\nfrom tracking.synth.cache import cached_recording\n"
+         "for name in sys.argv[1:]:\n    cached_recording(name)", *names],
+        cwd=ROOT, env=env, stdout=subprocess.DEVNULL)
+
+
+def pytest_sessionfinish(session, exitstatus):
+    if _prefetch is not None and _prefetch.poll() is None:   # the tests are done: what is left is not needed
+        _prefetch.terminate()
+        _prefetch.wait(timeout=30)
+
+
 # The real Moonraker + Klippy, started once per session for every test that asks (tests/moonraker_server.py).
 from moonraker_server import moonraker_server  # noqa: E402,F401

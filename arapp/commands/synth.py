@@ -10,6 +10,10 @@ def add_arguments(parser):
     parser.add_argument("--force", action="store_true", help="overwrite an existing recording")
     parser.add_argument("--frames", type=int, help="render only the first N frames (quick previews)")
     parser.add_argument("--list", action="store_true", help="list the presets and exit")
+    parser.add_argument("--cached", action="store_true",
+                        help="print the preset's recording folder: the bundled recordings/NAME, else the preset "
+                        "rendered into the cache (.cache/recordings/, or $ARAPP_RECORDINGS_CACHE) the first time; "
+                        "'all': every preset the tests and benchmarks use (the held cards' too)")
 
 
 def run(args):
@@ -28,6 +32,8 @@ def run(args):
             print(f"{name:18s} {kind} {cam['width']}x{cam['height']} "
                   f"{p['duration']:.1f} s  {', '.join(a['kind'] for a in p['anchors'])}  {p['trajectory']['kind']}")
         return 0
+    if args.cached:
+        return _cached(args.scene, progress_to=sys.stderr)
     if not args.out:
         raise ValueError("--out is required: the recording folder to write (e.g. recordings/my_scene)")
     if args.frames is not None and args.frames < 1:
@@ -50,4 +56,24 @@ def run(args):
         print(f"\rwrote {out}: {session.camera.width}x{session.camera.height}, "
               f"{scene.frame_count if args.frames is None else min(args.frames, scene.frame_count)} frames, "
               f"{size:.1f} MB", file=sys.stderr)
+    return 0
+
+
+def _cached(scene: str, progress_to) -> int:
+    """`--cached`: print the folder of each preset named (bundled, or rendered into the cache on first use)."""
+    from tracking.synth.cache import bundled_folder, cached_recording
+    from tracking.synth.presets import HELD, PRESETS, preset
+
+    names = [*PRESETS, *HELD] if scene == "all" else [scene]
+    for name in names:
+        preset(name)  # an unknown name is refused before anything is rendered
+        folder = bundled_folder(name)
+        if folder is None:
+            def progress(i, n, name=name):
+                if i % 10 == 0 or i == n:
+                    print(f"\rrendering {name}: frame {i}/{n}", end="" if i < n else "\n", file=progress_to,
+                          flush=True)
+
+            folder = cached_recording(name, progress=progress)
+        print(folder)
     return 0
