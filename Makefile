@@ -18,7 +18,8 @@ PRUSALINK_STAMP := $(PRUSALINK)/.installed
 SERVER_STAMPS := $(OCTO_STAMP) $(MOON_STAMP) $(KLIPPY_STAMP) $(PRUSALINK_STAMP)
 
 # `make test` runs the suite in TEST_WORKERS processes (pytest-xdist), one per core of CI's 2-core machine;
-# --dist loadfile keeps each test file on one worker, so its module fixtures are built once. 0: one process.
+# --dist loadfile keeps each test file on one worker, so its module fixtures are built once; the files go out
+# longest first (tests/conftest.py FILE_SECONDS; --no-loadscope-reorder keeps that order). 0: one process.
 TEST_WORKERS ?= 2
 
 export PYOPENGL_PLATFORM ?= egl
@@ -72,7 +73,7 @@ demo: $(STAMP)
 	$(ARAPP) demo --out out/demo
 
 test: $(STAMP) $(SERVER_STAMPS)
-	$(VENV)/bin/lint-imports --no-cache && $(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile tests
+	$(VENV)/bin/lint-imports --no-cache && $(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder tests
 
 # Every synthetic preset's recording: the bundled ones in recordings/, the rest rendered once into the recordings
 # cache (.cache/recordings/, see recordings/README.md). Tests and benchmarks render what they need on first use.

@@ -128,8 +128,10 @@ def test_set_is_small_and_covers_the_cases():
     assert size < 20e6, f"recordings/ holds {size / 1e6:.1f} MB; the budget is 20 MB (render the rest on demand)"
     assert all(n in PRESETS for n in bundled), "every bundled recording is a preset (arapp synth NAME renders it)"
     assert {"board_orbit", "printer_bed"} <= set(bundled)   # the demo's and the print preview's
-    sizes = {(load_session(recording_folder(n)).camera.width, load_session(recording_folder(n)).camera.height)
-             for n in PRESETS}
+    for n in bundled:   # a bundled recording is its preset's (the others are rendered from theirs)
+        cam = load_session(RECORDINGS / n).camera
+        assert (cam.width, cam.height) == (PRESETS[n]["camera"]["width"], PRESETS[n]["camera"]["height"])
+    sizes = {(p["camera"]["width"], p["camera"]["height"]) for p in PRESETS.values()}
     assert {(640, 480), (1280, 720)} <= sizes
     bed = load_session(recording_folder("printer_bed")).anchors[0]
     assert (bed.kind, bed.dictionary, bed.id, bed.length) == ("aruco", "DICT_4X4_50", 42, 0.04)
