@@ -28,7 +28,7 @@ export MPLBACKEND ?= Agg
 
 .PHONY: setup demo test bench recordings clean
 
-setup: $(STAMP) $(SERVER_STAMPS)
+setup: $(STAMP) $(SERVER_STAMPS) recordings
 
 $(STAMP): pyproject.toml constraints.txt requirements-peers.txt scripts/system-deps.sh
 	./scripts/system-deps.sh prusa-slicer
@@ -72,13 +72,14 @@ $(PRUSALINK_STAMP): requirements-prusalink-server.txt scripts/system-deps.sh
 demo: $(STAMP)
 	$(ARAPP) demo --out out/demo
 
-test: $(STAMP) $(SERVER_STAMPS)
+test: $(STAMP) $(SERVER_STAMPS) recordings
 	$(VENV)/bin/lint-imports --no-cache && $(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder tests
 
-# Every synthetic preset's recording: the bundled ones in recordings/, the rest rendered once into the recordings
-# cache (.cache/recordings/, see recordings/README.md). Tests and benchmarks render what they need on first use.
+# Every synthetic preset's recording the tests and benchmarks read: the bundled ones in recordings/, the rest
+# rendered once into the recordings cache (.cache/recordings/, see recordings/README.md; a few seconds when they
+# are there). Part of the set-up; tests and benchmarks would render a missing one on first use.
 recordings: $(STAMP)
-	$(ARAPP) synth all --cached
+	$(ARAPP) synth all --cached --jobs $(or $(filter-out 0,$(TEST_WORKERS)),1) >/dev/null
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py --out BENCHMARKS.md $(if $(ONLY),--only $(ONLY) --merge)

@@ -14,6 +14,8 @@ def add_arguments(parser):
                         help="print the preset's recording folder: the bundled recordings/NAME, else the preset "
                         "rendered into the cache (.cache/recordings/, or $ARAPP_RECORDINGS_CACHE) the first time; "
                         "'all': every preset the tests and benchmarks use (the held cards' too)")
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="with --cached: render up to this many recordings at once (one process each)")
 
 
 def run(args):
@@ -32,8 +34,10 @@ def run(args):
             print(f"{name:18s} {kind} {cam['width']}x{cam['height']} "
                   f"{p['duration']:.1f} s  {', '.join(a['kind'] for a in p['anchors'])}  {p['trajectory']['kind']}")
         return 0
+    if args.jobs < 1:
+        raise ValueError(f"--jobs must be 1 or more (recordings rendered at once), got {args.jobs}")
     if args.cached:
-        return _cached(args.scene, progress_to=sys.stderr)
+        return _cached(args.scene, sys.stderr, args.jobs)
     if not args.out:
         raise ValueError("--out is required: the recording folder to write (e.g. recordings/my_scene)")
     if args.frames is not None and args.frames < 1:
@@ -59,14 +63,25 @@ def run(args):
     return 0
 
 
-def _cached(scene: str, progress_to) -> int:
-    """`--cached`: print the folder of each preset named (bundled, or rendered into the cache on first use)."""
+def _cached(scene: str, progress_to, jobs: int = 1) -> int:
+    """`--cached`: print the folder of each preset named (bundled, or rendered into the cache on first use);
+    with jobs > 1 the missing ones are rendered in that many processes at once."""
+    import time
+    from concurrent.futures import ProcessPoolExecutor
+
     from tracking.synth.cache import bundled_folder, cached_recording
     from tracking.synth.presets import HELD, PRESETS, preset
 
     names = [*PRESETS, *HELD] if scene == "all" else [scene]
     for name in names:
         preset(name)  # an unknown name is refused before anything is rendered
+    if jobs > 1:
+        missing = [n for n in names if bundled_folder(n) is None]
+        start = time.perf_counter()
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            for name, _ in zip(missing, pool.map(cached_recording, missing)):
+                print(f"{name} ready ({time.perf_counter() - start:.0f} s)", file=progress_to, flush=True)
+    for name in names:
         folder = bundled_folder(name)
         if folder is None:
             def progress(i, n, name=name):
