@@ -5,6 +5,7 @@ holds; the cache renders deterministically and notices a changed scene."""
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -259,3 +260,30 @@ def test_hand_border_timeline():
     assert all(skin_on_sheet[t] == 0 for t in before + after)
     assert all(skin_on_sheet[t] > 30 for t in middle)
     assert all(seen[t] for t in before + after)
+
+
+def test_cli_cached_prints_each_recordings_folder_and_refuses_bad_input(capsys, tmp_path, monkeypatch):
+    """`arapp synth NAME --cached` prints the bundled folder, or the cached one (rendered on first use: a
+    tiny preset here, into a cache named by ARAPP_RECORDINGS_CACHE); an unknown name or --jobs 0 is one line,
+    exit status 2, nothing rendered."""
+    import tracking.synth.presets as presets
+    from arapp.cli import main
+    from scenes import scene_dict
+
+    monkeypatch.setenv("ARAPP_RECORDINGS_CACHE", str(tmp_path / "cache"))
+    tiny = scene_dict("tiny", [{"t": 0.0, "eye": [0.0, -0.2, 0.4], "target": [0, 0, 0]},
+                               {"t": 0.1, "eye": [0.02, -0.2, 0.4], "target": [0, 0, 0]}],
+                      width=160, height=120, seed=79)
+    monkeypatch.setitem(presets.EXTRA_TUNING, "tiny_cli_check", tiny)
+    assert main(["synth", "board_orbit", "--cached"]) == 0
+    assert capsys.readouterr().out.strip() == str(RECORDINGS / "board_orbit")
+    assert main(["synth", "tiny_cli_check", "--cached"]) == 0
+    out = capsys.readouterr().out.strip()
+    assert out == str(tmp_path / "cache" / f"tiny_cli_check-{scene_key(tiny)}")
+    assert load_session(out).camera.width == 160 and (tmp_path / "cache").is_dir()
+    for argv, needle in ((["synth", "no_such_preset", "--cached"], "no synthetic preset 'no_such_preset'"),
+                         (["synth", "tiny_cli_check", "--cached", "--jobs", "0"], "--jobs must be 1 or more")):
+        rc = main(argv)
+        err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+        assert rc == 2 and len(err) == 1 and needle in err[0] and "Traceback" not in err[0]
+    assert sorted(p.name for p in (tmp_path / "cache").iterdir() if not p.name.startswith(".")) == [Path(out).name]
