@@ -13,6 +13,7 @@ wait on a file lock. A half-rendered folder is never seen: it is written under a
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -40,6 +41,7 @@ def cache_root() -> Path:
     return platformdirs.user_cache_path("arapp") / "recordings"
 
 
+@functools.lru_cache(maxsize=1)   # read once per process
 def renderer_fingerprint() -> str:
     """A hash of what turns a scene into a recording's bytes: tracking/synth's source (the presets left out:
     a preset's own JSON is hashed with it), the recording writer's source, OpenCV's and NumPy's versions."""
