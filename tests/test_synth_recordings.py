@@ -148,6 +148,7 @@ def test_cache_renders_deterministically_and_notices_a_changed_scene(tmp_path, m
     tiny = scene_dict("tiny", [{"t": 0.0, "eye": [0.0, -0.2, 0.4], "target": [0, 0, 0]},
                                {"t": 0.1, "eye": [0.02, -0.2, 0.4], "target": [0, 0, 0]}],
                       width=160, height=120, seed=77)
+    tiny["desk"].update(size=[0.4, 0.3], ppm=400)   # a small desk texture: the render takes a fraction of a second
     monkeypatch.setitem(presets.EXTRA_TUNING, "tiny_cache_check", tiny)
     a = cached_recording("tiny_cache_check", tmp_path / "a")
     b = cached_recording("tiny_cache_check", tmp_path / "b")
@@ -274,6 +275,7 @@ def test_cli_cached_prints_each_recordings_folder_and_refuses_bad_input(capsys, 
     tiny = scene_dict("tiny", [{"t": 0.0, "eye": [0.0, -0.2, 0.4], "target": [0, 0, 0]},
                                {"t": 0.1, "eye": [0.02, -0.2, 0.4], "target": [0, 0, 0]}],
                       width=160, height=120, seed=79)
+    tiny["desk"].update(size=[0.4, 0.3], ppm=400)   # a small desk texture: the render takes a fraction of a second
     monkeypatch.setitem(presets.EXTRA_TUNING, "tiny_cli_check", tiny)
     assert main(["synth", "board_orbit", "--cached"]) == 0
     assert capsys.readouterr().out.strip() == str(RECORDINGS / "board_orbit")
