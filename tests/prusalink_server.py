@@ -80,7 +80,7 @@ def free_port() -> int:
 # REPORTING_TIMEOUT (60 s). Each stays a window the link has to wait out (the second job after a first is
 # still refused for a while, the temperatures still come late), a few seconds instead of a minute. Set before
 # PrusaLink's modules copy the values (`from ..const import ...`).
-PRINT_END_S, TELEMETRY_TICK_S, REPORTING_TIMEOUT_S = 2.0, 1.0, 4.0
+PRINT_END_S, TELEMETRY_TICK_S, REPORTING_TIMEOUT_S = 2.0, 3.0, 4.0
 LAUNCHER = f"""
 import sys
 import prusa.link.const as const
