@@ -18,16 +18,17 @@ PRUSALINK_STAMP := $(PRUSALINK)/.installed
 SERVER_STAMPS := $(OCTO_STAMP) $(MOON_STAMP) $(KLIPPY_STAMP) $(PRUSALINK_STAMP)
 
 # `make test` runs the suite in TEST_WORKERS processes (pytest-xdist), one per core of CI's 2-core machine;
-# --dist loadfile keeps each test file on one worker, so its module fixtures are built once. 0: one process.
+# --dist loadfile keeps each test file on one worker, so its module fixtures are built once; the files go out
+# longest first (tests/conftest.py FILE_SECONDS; --no-loadscope-reorder keeps that order). 0: one process.
 TEST_WORKERS ?= 2
 
 export PYOPENGL_PLATFORM ?= egl
 export QT_QPA_PLATFORM ?= offscreen
 export MPLBACKEND ?= Agg
 
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test bench recordings clean
 
-setup: $(STAMP) $(SERVER_STAMPS)
+setup: $(STAMP) $(SERVER_STAMPS) recordings
 
 $(STAMP): pyproject.toml constraints.txt requirements-peers.txt scripts/system-deps.sh
 	./scripts/system-deps.sh prusa-slicer
@@ -71,11 +72,17 @@ $(PRUSALINK_STAMP): requirements-prusalink-server.txt scripts/system-deps.sh
 demo: $(STAMP)
 	$(ARAPP) demo --out out/demo
 
-test: $(STAMP) $(SERVER_STAMPS)
-	$(VENV)/bin/lint-imports --no-cache && $(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile tests
+test: $(STAMP) $(SERVER_STAMPS) recordings
+	$(VENV)/bin/lint-imports --no-cache && $(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder tests
+
+# Every synthetic preset's recording the tests and benchmarks read: the bundled ones in recordings/, the rest
+# rendered once into the recordings cache (.cache/recordings/, see recordings/README.md; a few seconds when they
+# are there). Part of the set-up; tests and benchmarks would render a missing one on first use.
+recordings: $(STAMP)
+	$(ARAPP) synth all --cached --jobs $(or $(filter-out 0,$(TEST_WORKERS)),1) >/dev/null
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py --out BENCHMARKS.md $(if $(ONLY),--only $(ONLY) --merge)
 
 clean:
-	rm -rf $(VENV) $(OCTO) $(MOON) $(KLIPPY) $(PRUSALINK) .prusalink-test out
+	rm -rf $(VENV) $(OCTO) $(MOON) $(KLIPPY) $(PRUSALINK) .prusalink-test out .cache/recordings

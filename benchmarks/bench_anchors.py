@@ -26,6 +26,7 @@ for p in (str(ROOT), str(HERE)):
         sys.path.insert(0, p)
 
 # the tuning and test recordings, as recordings/README.md and the synthesiser's presets list them
+from tracking.synth.cache import recording_folder  # noqa: E402
 from tracking.synth.presets import TEST, TUNING  # noqa: E402
 
 QR_TUNING = "qr_anchor"  # the plain way's QR call is chosen on this tuning recording
@@ -50,7 +51,7 @@ def choose_plain_qr(limit: int | None = None) -> tuple[str, dict]:
     """Measure OpenCV's QR calls on the tuning QR recording; (fastest that decodes, all measurements)."""
     from peers import QR_CALLS, chosen_qr_call
 
-    folder = ROOT / "recordings" / QR_TUNING
+    folder = recording_folder(QR_TUNING)
     if not (folder / "groundtruth.tum").is_file():
         return "QRCodeDetector.detectAndDecodeMulti", {n: (0, float("nan")) for n in QR_CALLS}
     return chosen_qr_call(folder, limit)
@@ -176,7 +177,7 @@ def _table(kind: str, results: dict) -> list[str]:
 def run(quick: bool = False) -> str:
     limit = 30 if quick else None
     qr_call, qr_measured = choose_plain_qr(limit)
-    results = {kind: {n: evaluate(ROOT / "recordings" / n, limit, qr_call) for n in names}
+    results = {kind: {n: evaluate(recording_folder(n), limit, qr_call) for n in names}
                for kind, names in (("Tuning", TUNING), ("Test", TEST))}
     lines = ["## Anchors: arapp AnchorTracker vs the plain OpenCV way", "",
              "Plain (`benchmarks/peers.py` PlainPeer): per-frame `ArucoDetector.detectMarkers` with "

@@ -28,16 +28,14 @@ MODEL = ROOT / "models" / "vase.json"
 
 
 def find_recording(width: int = 1280, height: int = 720) -> Path | None:
-    """A committed recording of that size, if any."""
-    import json
+    """A synthetic preset's recording of that size, if any (bundled in recordings/, or rendered into the
+    recordings cache on first use: tracking.synth.cache)."""
+    from tracking.synth.cache import recording_folder
+    from tracking.synth.presets import PRESETS
 
-    for session in sorted((ROOT / "recordings").glob("*/session.json")):
-        try:
-            cam = json.loads(session.read_text())["camera"]
-        except (ValueError, KeyError, OSError):
-            continue
-        if (cam.get("width"), cam.get("height")) == (width, height):
-            return session.parent
+    for name, scene in PRESETS.items():
+        if (scene["camera"]["width"], scene["camera"]["height"]) == (width, height):
+            return recording_folder(name)
     return None
 
 

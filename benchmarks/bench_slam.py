@@ -1,5 +1,6 @@
 """SLAM tracking (tracking.fusion.Tracker) against the plain OpenCV per-frame marker pose (and that pose
-through arapp's filter class), on the committed recordings with ground truth: tuning and test recordings
+through arapp's filter class), on the synthetic recordings with ground truth (bundled in recordings/ or rendered
+into the recordings cache on first use, tracking.synth.cache): tuning and test recordings
 in separate tables (recordings/README.md). Run: .venv/bin/python benchmarks/bench_slam.py [--quick]
 """
 
@@ -21,6 +22,7 @@ for _p in (str(ROOT), str(HERE)):
         sys.path.insert(0, _p)
 
 # the tuning and test recordings, as recordings/README.md and the synthesiser's presets list them
+from tracking.synth.cache import recording_folder  # noqa: E402
 from tracking.synth.presets import HEADON_TEST, HEADON_TUNING, HELD_TEST, HELD_TUNING, TEST, TUNING  # noqa: E402
 
 RECORDINGS = TUNING + TEST
@@ -61,7 +63,7 @@ def measure(name: str, qr_call: str = "QRCodeDetector.detectAndDecodeMulti") -> 
     from scenes import load_recording, run_tracker
     from tracking.fusion import Tracker
 
-    frames, session = load_recording(ROOT / "recordings" / name)
+    frames, session = load_recording(recording_folder(name))
     gt_t = np.array([f[0] for f in frames])
     gt = np.array([f[2] for f in frames])
     pt, pp, pms, ft, fp = _plain(frames, session, qr_call)
@@ -91,7 +93,7 @@ def measure_paced(name: str, pace: str) -> dict:
     from scenes import load_recording, run_tracker
     from tracking.fusion import Tracker
 
-    frames, session = load_recording(ROOT / "recordings" / name)
+    frames, session = load_recording(recording_folder(name))
     with Tracker(session.camera, session.anchors) as tr:
         r = run_tracker(tr, frames, pace=pace)
     return {"name": name, "pace": pace, "m": r["metrics"], "ms": float(np.median(r["ms"])),
@@ -142,7 +144,7 @@ def measure_held(name: str) -> dict:
 def _held_section(names: list[str]) -> list[str]:
     rows = [measure_held(n) for n in names]
     out = ["### Cards held before the camera (the anchors move in the room)", "",
-           "Recordings `tracking.synth.presets.HELD`, rendered on first use into build/synth/ (tests/scenes.py): a "
+           "Recordings `tracking.synth.presets.HELD`, rendered on first use into the recordings cache (tracking/synth/cache.py): a "
            "board or lone-marker card waved before a still webcam (slow drifts, two fast swings smeared past reading) "
            "with a textured wall 0.8 m behind, and `*_both`: a hand-held camera moving too. Ground truth: the camera "
            "in the card's frame. `plain`: PlainPeer on the same frames, same run. Goal (issue 25): frames placed >= "
@@ -223,7 +225,7 @@ def measure_headon(name: str) -> dict:
 def _headon_section(names: list[str]) -> list[str]:
     rows = [measure_headon(n) for n in names]
     out = ["### A small marker seen head-on (the planar ambiguity, issue 25.4)", "",
-           "Recordings `tracking.synth.presets.HEADON`, rendered on first use into build/synth/ (tests/scenes.py): a "
+           "Recordings `tracking.synth.presets.HEADON`, rendered on first use into the recordings cache (tracking.synth.cache, tests/scenes.py): a "
            "3 cm marker at ~0.7 m on a textured desk, the camera held by hand 4-7 degrees off the marker's normal, "
            "webcam effects (25 ms rolling shutter, MJPEG), 3 s at 640x480. `arapp`: the Tracker (the desk's keypoints "
            "judge the marker's tilt, tracking/anchors/desk.py); `plain`: PlainPeer, same frames, same run. Rotation: "
@@ -295,12 +297,13 @@ def run(quick: bool = False) -> str:
     from bench_anchors import choose_plain_qr
 
     qr_call, _ = choose_plain_qr(30 if quick else None)
-    names = [n for n in (QUICK if quick else RECORDINGS) if (ROOT / "recordings" / n / "groundtruth.tum").is_file()]
+    names = QUICK if quick else RECORDINGS   # the bundled ones, the others rendered into the cache on first use
     rows = {n: measure(n, qr_call) for n in names}
     tuning = [rows[n] for n in TUNING if n in rows]
     test = [rows[n] for n in TEST if n in rows]
     out = ["## SLAM tracking (anchors + keypoints) vs plain OpenCV marker pose", "",
-           "Recordings in `recordings/` with ground truth; measured on this CPU machine (shared, so times are "
+           "The presets' recordings with ground truth (`recordings/`, the rest rendered by "
+           "`arapp synth NAME --cached`); measured on this CPU machine (shared, so times are "
            "noisy). `slam`: the Tracker's output; `raw`: the same Tracker with its pose filter off "
            "(`Tracker(filter=False)`, a second run). `plain`: `benchmarks/peers.py` PlainPeer every frame "
            f"(detectMarkers + solvePnP; QR codes with `{qr_call}`, the fastest OpenCV QR call that decodes, "
@@ -346,8 +349,6 @@ def run(quick: bool = False) -> str:
     plain_ms = {n: r["plain_ms"] for n, r in rows.items()}
     paced = ["marker_occluded", "fast_motion", "board_orbit_720p", "test_fast_pan"] if not quick else ["marker_occluded"]
     for name in paced:
-        if not (ROOT / "recordings" / name / "groundtruth.tum").is_file():
-            continue
         for pace in ("live", "flat-out"):
             q = measure_paced(name, pace)
             plain = f"{plain_ms[name]:.1f}" if name in plain_ms else "-"

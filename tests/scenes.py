@@ -168,14 +168,19 @@ def load_recording(folder, frames: slice | None = None):
 
 
 def bundled_recording(name: str, frames: slice | None = None):
-    """`load_recording` of recordings/NAME in this repository; fails the test (not skips) when missing."""
-    from pathlib import Path
-
+    """`load_recording` of recordings/NAME in this repository or, for a preset the repository does not bundle,
+    of the preset rendered into the recordings cache on first use (tracking.synth.cache: once per run, under a
+    lock shared by the xdist workers); fails the test (not skips) when neither exists."""
     import pytest
 
-    folder = Path(__file__).resolve().parents[1] / "recordings" / name
-    if not (folder / "groundtruth.tum").is_file():
-        pytest.fail(f"recordings/{name} with groundtruth.tum is part of the repository and must exist")
+    from tracking.synth.cache import bundled_folder, cached_recording
+    from tracking.synth.presets import EXTRA_TUNING, HELD, PRESETS
+
+    folder = bundled_folder(name)
+    if folder is None:
+        if name not in PRESETS and name not in EXTRA_TUNING and name not in HELD:
+            pytest.fail(f"recordings/{name} with groundtruth.tum is part of the repository and must exist")
+        folder = cached_recording(name)
     return load_recording(folder, frames)
 
 
@@ -198,25 +203,11 @@ def marker_side(quad, side: int):
 
 def held_recording_folder(name: str):
     """The folder of the held-card recording `name` (tracking.synth.presets.HELD), rendered on first use into
-    build/synth/ (git-ignored) under a name holding a hash of its scene, so a changed preset renders anew."""
-    import hashlib
-    import json
-    from pathlib import Path
+    the recordings cache (tracking.synth.cache: .cache/recordings/, git-ignored) under a name holding a hash of
+    its scene and of the renderer, so a changed preset renders anew; parallel workers render it once."""
+    from tracking.synth.cache import cached_recording
 
-    from arapp.exchange.staging import staged_folder
-    from cache_helpers import file_lock
-    from tracking.synth import synthesize
-    from tracking.synth.presets import preset
-    from tracking.synth.scene import parse_scene
-
-    data = preset(name)
-    digest = hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
-    folder = Path(__file__).resolve().parents[1] / "build" / "synth" / f"{name}-{digest}"
-    with file_lock(folder.parent / f"{folder.name}.lock"):   # parallel test workers (or a bench) render it once
-        if not (folder / "groundtruth.tum").is_file():
-            with staged_folder(folder, replace=True) as tmp:   # a half-rendered recording is never left behind
-                synthesize(parse_scene(data, f"preset {name}"), tmp, force=True)
-    return folder
+    return cached_recording(name)
 
 
 def held_recording(name: str, frames: slice | None = None):

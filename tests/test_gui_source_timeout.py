@@ -90,7 +90,16 @@ def test_a_camera_with_no_picture_is_given_up_with_one_clear_line(qtbot, window,
     folder = write_arc_recording(tmp_path / "arc", n=6)
     w.open_source(str(folder))
     qtbot.waitUntil(lambda: w.last_shown is not None, timeout=TIMEOUT_MS)
-    qtbot.wait(int(3 * SHORT_S * 1000))  # well past the limit: a source with pictures is not given up
+    # well past the limit (the session's clock moved on 3 limits, a fake clock for the real wait), and the
+    # window's status timer (250 ms) ticked: a source with pictures is not given up
+    real_clock = s.first_picture.clock
+    s.first_picture.clock = lambda: real_clock() + 3 * SHORT_S
+    try:
+        ticks = []
+        w._status_timer.timeout.connect(lambda: ticks.append(1))
+        qtbot.waitUntil(lambda: len(ticks) >= 2, timeout=TIMEOUT_MS)
+    finally:
+        s.first_picture.clock = real_clock
     assert w.engine is not None and w.source_spec == str(folder) and len(w.errors) == 1
 
 

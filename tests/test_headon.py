@@ -2,7 +2,7 @@
 
 Recording: tracking.synth.presets.HEADON `test_headon` (a 3 cm marker at ~0.7 m on a textured desk, the camera
 held by hand 4-7 degrees off the marker's normal, webcam effects), rendered on first use and cached in
-build/synth/ (tests/scenes.py `held_recording`). It was made from fresh seeds and never looked at while
+the recordings cache, .cache/recordings/ (tests/scenes.py `held_recording`). It was made from fresh seeds and never looked at while
 choosing the desk's parameters (those were chosen on tune_headon and tune_headon_b). Ground truth: the
 camera pose per frame from the generator, an oracle independent of the tracker. The goals (rotation error
 <= 2 degrees after the first second, jitter <= half of plain OpenCV's) are asserted as the issue states them;

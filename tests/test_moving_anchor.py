@@ -1,7 +1,7 @@
 """A card held before a camera (issue 25 part 2): the anchors move in the room, so the room's keypoints must
 not carry the model.
 
-Recordings: tracking.synth.presets.HELD, rendered on first use and cached in build/synth/ (tests/scenes.py
+Recordings: tracking.synth.presets.HELD, rendered on first use and cached in .cache/recordings/ (tests/scenes.py
 `held_recording`): a board or marker card waved before a still webcam (slow drifts a few cm/s and two fast
 swings smeared past reading), a textured wall 0.8 m behind it; and one where a hand-held camera moves too.
 Ground truth: the camera in the card's anchor frame, per frame, from the generator (an oracle independent of

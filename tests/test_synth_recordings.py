@@ -1,8 +1,11 @@
-"""The committed synthetic recordings in recordings/: valid, complete, small, and their ground truth holds."""
+"""The synthetic recordings: those committed in recordings/ and the presets rendered on demand into the
+recordings cache (tracking.synth.cache): valid, complete, the committed ones small, and their ground truth
+holds; the cache renders deterministically and notices a changed scene."""
 
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -13,6 +16,7 @@ from tracking.recording.schema import load_session
 from tracking.sources import RecordingSource
 from tracking.synth import scene_from_arg
 from tracking.synth.patterns import anchor_corners
+from tracking.synth.cache import bundled_folder, cached_recording, recording_folder, scene_key
 from tracking.synth.presets import EXTRA_TUNING, PRESETS, TEST, TUNING
 from tracking.synth.renderer import DeskRenderer
 
@@ -72,7 +76,7 @@ def rolling_shutter_pixels(session, anchor, renderer, t, readout):
 
 @pytest.mark.parametrize("name", list(PRESETS))
 def test_recording_is_complete_and_consistent(name):
-    folder = RECORDINGS / name
+    folder = recording_folder(name)
     session = load_session(folder)
     assert session.source["kind"] == "synthetic"
     times, poses = read_tum(folder / "groundtruth.tum")
@@ -120,21 +124,53 @@ def test_recording_is_complete_and_consistent(name):
 
 
 def test_set_is_small_and_covers_the_cases():
-    def size(names):
-        return sum(p.stat().st_size for n in names for p in (RECORDINGS / n).rglob("*") if p.is_file())
-
-    assert size(TUNING) < 40e6, f"the tuning recordings hold {size(TUNING) / 1e6:.1f} MB; the budget is 40 MB"
-    assert size(TEST) < 12e6, f"the test recordings hold {size(TEST) / 1e6:.1f} MB; the budget is 12 MB"
-    sizes = {(load_session(RECORDINGS / n).camera.width, load_session(RECORDINGS / n).camera.height) for n in PRESETS}
+    bundled = [p.name for p in RECORDINGS.iterdir() if p.is_dir()]
+    size = sum(p.stat().st_size for p in RECORDINGS.rglob("*") if p.is_file())
+    assert size < 20e6, f"recordings/ holds {size / 1e6:.1f} MB; the budget is 20 MB (render the rest on demand)"
+    assert all(n in PRESETS for n in bundled), "every bundled recording is a preset (arapp synth NAME renders it)"
+    assert {"board_orbit", "printer_bed"} <= set(bundled)   # the demo's and the print preview's
+    for n in bundled:   # a bundled recording is its preset's (the others are rendered from theirs)
+        cam = load_session(RECORDINGS / n).camera
+        assert (cam.width, cam.height) == (PRESETS[n]["camera"]["width"], PRESETS[n]["camera"]["height"])
+    sizes = {(p["camera"]["width"], p["camera"]["height"]) for p in PRESETS.values()}
     assert {(640, 480), (1280, 720)} <= sizes
-    bed = load_session(RECORDINGS / "printer_bed").anchors[0]
+    bed = load_session(recording_folder("printer_bed")).anchors[0]
     assert (bed.kind, bed.dictionary, bed.id, bed.length) == ("aruco", "DICT_4X4_50", 42, 0.04)
-    assert load_session(RECORDINGS / "qr_anchor").anchors[0].kind == "qr"
+    assert load_session(recording_folder("qr_anchor")).anchors[0].kind == "qr"
+
+
+def test_cache_renders_deterministically_and_notices_a_changed_scene(tmp_path, monkeypatch):
+    """A preset rendered twice into two caches gives the same bytes; a preset whose scene changed gets a new
+    folder (rendered anew, the stale one removed); the bundled recordings are found in recordings/ first."""
+    import tracking.synth.presets as presets
+    from scenes import scene_dict
+
+    tiny = scene_dict("tiny", [{"t": 0.0, "eye": [0.0, -0.2, 0.4], "target": [0, 0, 0]},
+                               {"t": 0.1, "eye": [0.02, -0.2, 0.4], "target": [0, 0, 0]}],
+                      width=160, height=120, seed=77)
+    tiny["desk"].update(size=[0.4, 0.3], ppm=400)   # a small desk texture: the render takes a fraction of a second
+    monkeypatch.setitem(presets.EXTRA_TUNING, "tiny_cache_check", tiny)
+    a = cached_recording("tiny_cache_check", tmp_path / "a")
+    b = cached_recording("tiny_cache_check", tmp_path / "b")
+    assert a.name == b.name == f"tiny_cache_check-{scene_key(tiny)}"
+    files = sorted(p.name for p in a.iterdir())
+    assert {"video.avi", "groundtruth.tum", "session.json", "frames.csv"} <= set(files)
+    assert files == sorted(p.name for p in b.iterdir())
+    assert all((a / f).read_bytes() == (b / f).read_bytes() for f in files)
+    stamp = (a / "video.avi").stat().st_mtime_ns
+    assert cached_recording("tiny_cache_check", tmp_path / "a") == a   # cached: not rendered again
+    assert (a / "video.avi").stat().st_mtime_ns == stamp
+    monkeypatch.setitem(presets.EXTRA_TUNING, "tiny_cache_check", {**tiny, "seed": 78})
+    c = cached_recording("tiny_cache_check", tmp_path / "a")
+    assert c != a and c.is_dir() and not a.exists()
+    assert (c / "video.avi").read_bytes() != (b / "video.avi").read_bytes()
+    assert bundled_folder("board_orbit") == RECORDINGS / "board_orbit" == recording_folder("board_orbit")
+    assert bundled_folder("xt_fast_pan_f") is None   # an extra tuning scene: never bundled
 
 
 def test_marker_occluded_timeline():
     """Marker covered by the hand for 2 s (from 1.0 s to 3.0 s), then out of view for more than 1 s, then back."""
-    folder = RECORDINGS / "marker_occluded"
+    folder = recording_folder("marker_occluded")
     session = load_session(folder)
     anchor = session.anchors[0]
     times, poses = read_tum(folder / "groundtruth.tum")
@@ -196,7 +232,7 @@ def test_hand_border_timeline():
     """test_hand_border: the marker is detected before the hand comes and after it has gone, and the hand
     (skin pixels by Kovac's RGB rule, clearly saturated) is on the marker's sheet only between the occluder's
     start and end, and there throughout the time it is fully in."""
-    folder = RECORDINGS / "test_hand_border"
+    folder = recording_folder("test_hand_border")
     session = load_session(folder)
     occ = PRESETS["test_hand_border"]["effects"]["occluder"]
     anchor = session.anchors[0]
@@ -225,3 +261,31 @@ def test_hand_border_timeline():
     assert all(skin_on_sheet[t] == 0 for t in before + after)
     assert all(skin_on_sheet[t] > 30 for t in middle)
     assert all(seen[t] for t in before + after)
+
+
+def test_cli_cached_prints_each_recordings_folder_and_refuses_bad_input(capsys, tmp_path, monkeypatch):
+    """`arapp synth NAME --cached` prints the bundled folder, or the cached one (rendered on first use: a
+    tiny preset here, into a cache named by ARAPP_RECORDINGS_CACHE); an unknown name or --jobs 0 is one line,
+    exit status 2, nothing rendered."""
+    import tracking.synth.presets as presets
+    from arapp.cli import main
+    from scenes import scene_dict
+
+    monkeypatch.setenv("ARAPP_RECORDINGS_CACHE", str(tmp_path / "cache"))
+    tiny = scene_dict("tiny", [{"t": 0.0, "eye": [0.0, -0.2, 0.4], "target": [0, 0, 0]},
+                               {"t": 0.1, "eye": [0.02, -0.2, 0.4], "target": [0, 0, 0]}],
+                      width=160, height=120, seed=79)
+    tiny["desk"].update(size=[0.4, 0.3], ppm=400)   # a small desk texture: the render takes a fraction of a second
+    monkeypatch.setitem(presets.EXTRA_TUNING, "tiny_cli_check", tiny)
+    assert main(["synth", "board_orbit", "--cached"]) == 0
+    assert capsys.readouterr().out.strip() == str(RECORDINGS / "board_orbit")
+    assert main(["synth", "tiny_cli_check", "--cached"]) == 0
+    out = capsys.readouterr().out.strip()
+    assert out == str(tmp_path / "cache" / f"tiny_cli_check-{scene_key(tiny)}")
+    assert load_session(out).camera.width == 160 and (tmp_path / "cache").is_dir()
+    for argv, needle in ((["synth", "no_such_preset", "--cached"], "no synthetic preset 'no_such_preset'"),
+                         (["synth", "tiny_cli_check", "--cached", "--jobs", "0"], "--jobs must be 1 or more")):
+        rc = main(argv)
+        err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+        assert rc == 2 and len(err) == 1 and needle in err[0] and "Traceback" not in err[0]
+    assert sorted(p.name for p in (tmp_path / "cache").iterdir() if not p.name.startswith(".")) == [Path(out).name]

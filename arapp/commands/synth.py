@@ -10,6 +10,12 @@ def add_arguments(parser):
     parser.add_argument("--force", action="store_true", help="overwrite an existing recording")
     parser.add_argument("--frames", type=int, help="render only the first N frames (quick previews)")
     parser.add_argument("--list", action="store_true", help="list the presets and exit")
+    parser.add_argument("--cached", action="store_true",
+                        help="print the preset's recording folder: the bundled recordings/NAME, else the preset "
+                        "rendered into the cache (.cache/recordings/, or $ARAPP_RECORDINGS_CACHE) the first time; "
+                        "'all': every preset the tests and benchmarks use (the held cards' too)")
+    parser.add_argument("--jobs", type=int, default=1,
+                        help="with --cached: render up to this many recordings at once (one process each)")
 
 
 def run(args):
@@ -34,6 +40,10 @@ def run(args):
         print(f"scene revisits (tracking.synth.revisits): SET_map, SET_revisit_N_VARIANT; sets {', '.join(SETS)} "
               f"(tune_scene: tuning, test_scene: test); variants {', '.join(VARIANTS)}")
         return 0
+    if args.jobs < 1:
+        raise ValueError(f"--jobs must be 1 or more (recordings rendered at once), got {args.jobs}")
+    if args.cached:
+        return _cached(args.scene, sys.stderr, args.jobs)
     if not args.out:
         raise ValueError("--out is required: the recording folder to write (e.g. recordings/my_scene)")
     if args.frames is not None and args.frames < 1:
@@ -56,4 +66,35 @@ def run(args):
         print(f"\rwrote {out}: {session.camera.width}x{session.camera.height}, "
               f"{scene.frame_count if args.frames is None else min(args.frames, scene.frame_count)} frames, "
               f"{size:.1f} MB", file=sys.stderr)
+    return 0
+
+
+def _cached(scene: str, progress_to, jobs: int = 1) -> int:
+    """`--cached`: print the folder of each preset named (bundled, or rendered into the cache on first use);
+    with jobs > 1 the missing ones are rendered in that many processes at once."""
+    import time
+    from concurrent.futures import ProcessPoolExecutor
+
+    from tracking.synth.cache import bundled_folder, cached_recording
+    from tracking.synth.presets import HELD, PRESETS, preset
+
+    names = [*PRESETS, *HELD] if scene == "all" else [scene]
+    for name in names:
+        preset(name)  # an unknown name is refused before anything is rendered
+    if jobs > 1:
+        missing = [n for n in names if bundled_folder(n) is None]
+        start = time.perf_counter()
+        with ProcessPoolExecutor(max_workers=jobs) as pool:
+            for name, _ in zip(missing, pool.map(cached_recording, missing)):
+                print(f"{name} ready ({time.perf_counter() - start:.0f} s)", file=progress_to, flush=True)
+    for name in names:
+        folder = bundled_folder(name)
+        if folder is None:
+            def progress(i, n, name=name):
+                if i % 10 == 0 or i == n:
+                    print(f"\rrendering {name}: frame {i}/{n}", end="" if i < n else "\n", file=progress_to,
+                          flush=True)
+
+            folder = cached_recording(name, progress=progress)
+        print(folder)
     return 0

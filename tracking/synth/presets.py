@@ -1,7 +1,8 @@
-"""Built-in synthetic scenes (the committed recordings in recordings/ are these presets).
+"""Built-in synthetic scenes (the recordings in recordings/ and in the recordings cache are these presets).
 
 Each preset is a scene dict in the JSON format of tracking.synth.scene.
-Regenerate all of them with `arapp synth all --out recordings --force`.
+Some are bundled in recordings/, the others rendered on demand into the recordings cache
+(tracking/synth/cache.py, `arapp synth NAME --cached`; recordings/README.md says which).
 
 TUNING presets are the recordings the tracker's parameters were chosen on; TEST presets (names
 starting with test_) were made later, from seeds never used for tuning, with webcam effects
