@@ -390,6 +390,10 @@ class Tracker:
             got = self._follow_on_anchors()
         if got is not None:
             return self._flow_result(got, markers)
+        if self.status.lost == 0:
+            # the card moves unseen (a swing): the anchors' filter state and tracked corners are stale, and a
+            # filter that carried them over would lag the card's new place by centimetres when it is read again
+            self.anchor_tracker.reset()
         return self._lost_frame(markers)
 
     def _moving_anchors_hold(self, ar, pose, got) -> tuple[bool, tuple | None]:
@@ -397,6 +401,11 @@ class Tracker:
         ran): not when they cannot start the pose, are implausible, or the flow on them holds better."""
         h, frame, t = self.handover, self.frame, self.frame.t
         if self.status.lost > 0 or self.motion.last is None:
+            if h.board_fit(ar) is None:
+                # a lone marker or QR code after a swing: nothing else can carry the card, and its smeared
+                # reading is what plain detection shows (the sharpness rule waits for a camera's next,
+                # sharper frames; a card keeps swinging); a board's smeared start reads centimetres off
+                return True, got
             return not h.cannot_start(ar, frame), got
         if not h.plausible(pose, self.motion.last, t) or h.start_uncertain(ar, frame):
             # a board smeared at a swing's start reads centimetres off: the points on it, else lost
