@@ -149,6 +149,22 @@ def test_held_marker_card_is_no_worse_than_plain(name):
     assert all(s in ("marker", "slam") for s, p in zip(r["states"], r["poses"]) if p is not None)
 
 
+@pytest.mark.xfail(strict=True, reason="not met yet (issue 25): on test_held_rest the board starts drifting 0.6 s before "
+                   "its first swing while the hand-held camera moves, and the map's check needs two disagreeing checks "
+                   "10 frames apart: the swing comes first and the still room carries the card up to 14 cm off for 3 "
+                   "frames (tune_held_rest, drifting a second before its swing, is noticed in time)")
+def test_held_card_put_down_between_swings():
+    """Both move, and the board card is put down for 2.5 s between its swings while the camera goes on moving
+    (the map stays off once the card was seen to move: letting it back while the card rested placed the
+    second swing's smeared start 7 cm off): the goal of the board cards, as many frames as plain OpenCV and
+    none more than 3 cm off."""
+    r = _run("test_held_rest")
+    e, plain = r["errors"], r["plain"]
+    assert r["moving"]
+    assert int(np.isfinite(e).sum()) >= int(np.isfinite(plain).sum())
+    assert float(np.nanmax(e)) <= MAX_ERR_M, (float(np.nanmax(e)), int(np.nanargmax(e)))
+
+
 @pytest.mark.parametrize("name", ["board_orbit", "static_camera", "printer_bed"])
 def test_still_card_is_not_taken_for_a_moving_one(name):
     """A card lying still on a desk: the room is rigid with the anchors and the map keeps carrying. The
