@@ -1,7 +1,8 @@
 """Anchors that move in the room (a card held up to a webcam): on keypoint frames the background (ORB
 features off the anchors between two checked frames, and the map's points off them) is tested against the
-anchors' poses (`tracking.slam.anchor_motion`); once it disagrees, `MovingAnchors.moving` turns on for the
-rest of the session and the tracker drops its map."""
+anchors' poses (`tracking.slam.anchor_motion`), and for a lone marker or QR code, whose pose is too loose for
+that, in pixels: whether the background stood still while the anchors' corners moved. Once it disagrees,
+`MovingAnchors.moving` turns on for the rest of the session and the tracker drops its map."""
 
 from __future__ import annotations
 
@@ -62,7 +63,8 @@ class MovingAnchors:
         if self.moving or len(feats) < self.min_inliers or ar.covered:
             return False
         # only a board that fits well holds its turn to a few hundredths of a degree; a lone marker's pose turns
-        # by a degree with its noise (5-9 px at the image edge: a still desk then reads as moving)
+        # by a degree with its noise (5-9 px at the image edge: a still desk then reads as moving), so a lone
+        # marker is compared with the background in pixels instead
         board = self.handover.board_fit(ar) is not None
         verdict = (self._background_verdict(anchor_pose, feats, frame)
                    if steady and board and fits_well(ar) else None)

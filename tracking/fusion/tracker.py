@@ -36,9 +36,10 @@ map keeps the pace it would have live, whatever the machine's load.
 
 Anchors that move in the room (a card held up to a webcam, `anchors_moving`): on keypoint frames the
 background (ORB features off the anchors between two checked frames, and the map's points off them) is
-tested against the anchors' poses (`tracking.slam.anchor_motion`); once it disagrees, the map is dropped
-and no longer built, only flow on points of the anchors' own plane within their outline carries unreadable
-frames, and a frame nothing on the anchors carries is lost.
+tested against the anchors' poses (`tracking.slam.anchor_motion`; a lone marker's corners against a still
+background, in pixels); once it disagrees, the map is dropped and no longer built, only flow on points of
+the anchors' own plane within their outline carries unreadable frames, a lone marker read again after a
+swing starts the pose even smeared, and a frame nothing on the anchors carries is lost.
 
 Anchor measurements that must not move the model: a lone marker whose white
 margin is partly covered (a hand reaching in, `anchors.occlusion`) is not shown

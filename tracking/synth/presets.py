@@ -376,8 +376,8 @@ def preset(name: str) -> dict:
 # Cards held before a camera (tracking.synth.held, issue 25): the anchors on a textured card moved by hand
 # in front of a textured wall, seen by a still webcam (a laptop's) or by a moving camera too ("both").
 # Rendered on demand and cached (tests/scenes.py `held_recording`), not bundled. Tuning ones (scene
-# 331-333, desk 431-433, wall 531-533) may be looked at; test ones (scene 131-133, desk 231-233, wall
-# 251-253) are only measured.
+# 331-334, desk 431-434, wall 531-534) may be looked at; test ones (scene 131-134, desk 231-234, wall
+# 251-254) are only measured.
 def _held_keys(seed: int, swings: list[tuple[float, float, list[float], list[float]]],
                duration: float, drift_mm: float = 60.0, rest: tuple[float, float] | None = None) -> list[dict]:
     """Card keys (tracking.synth.held) over `duration` s: the card starts still at the room origin facing
