@@ -62,7 +62,7 @@ def evaluate(folder: Path, limit: int | None = None, qr_call: str = "QRCodeDetec
     from tracking.anchors import AnchorTracker
     from tracking.anchors.model import build_models
     from tracking.poses import read_tum
-    from tracking.session import load_session
+    from tracking.recording.schema import load_session
 
     if not (folder / "session.json").is_file() or not (folder / "groundtruth.tum").is_file():
         return None

@@ -28,9 +28,9 @@ def run(quick: bool = False) -> str:
     from arapp.printing.bed_anchor import bed_from_anchor_measured, save_bed_anchor
     from arapp.printing.gcode import parse_gcode
     from arapp.render import OverlayRenderer
-    from arapp.toolpath_overlay import toolpath_line_sets, world_from_bed
+    from arapp.engine.toolpath_overlay import toolpath_line_sets, world_from_bed
     from tracking.poses import invert, read_tum
-    from tracking.session import load_session
+    from tracking.recording.schema import load_session
 
     with tempfile.TemporaryDirectory() as tmp:
         profile = load_profile(save_bed_anchor(Path(tmp) / "p.json", {"kind": "aruco", "dictionary": "DICT_4X4_50",
@@ -38,7 +38,7 @@ def run(quick: bool = False) -> str:
                                                bed_from_anchor_measured((65.0, 45.0))))
     model = load_model(ROOT / "models" / "vase.json")
     model.placement = type(model.placement)(size_mm=40.0)
-    result = slice_mesh(placed_solid(model, model.placement_matrix("mm"), profile=profile),
+    result = slice_mesh(placed_solid(model, profile=profile),
                         SliceSettings(layer_height=0.2, infill=20), profile)
     layers = parse_gcode(result.gcode)
     sets = toolpath_line_sets(layers, (profile.bed.width, profile.bed.depth, profile.bed.height))

@@ -1,7 +1,7 @@
 """Shared scaffolding of the desktop-app tests: the synthetic arc recording and the main window.
 
 The arc: a slow orbit around one 80 mm ArUco marker at ~0.35 m, written by
-tracking.recorder with the true camera poses (world_from_camera) next to the frames.
+tracking.recording.writer with the true camera poses (world_from_camera) next to the frames.
 """
 
 from __future__ import annotations
@@ -28,8 +28,8 @@ def write_arc_recording(folder: Path, n: int = N_FRAMES) -> Path:
     """Write the arc (n frames at 30 fps, 640x480, K known) to folder and return it."""
     from tracking.anchors.render import render_view
     from tracking.camera import Camera
-    from tracking.recorder import RecordingWriter
-    from tracking.session import parse_anchors
+    from tracking.recording.writer import RecordingWriter
+    from tracking.recording.schema import parse_anchors
 
     cam = Camera(np.array([[560.0, 0, 322.5], [0, 560.0, 236.5], [0, 0, 1]]), np.zeros(5), 640, 480)
     anchors = parse_anchors(ANCHORS)

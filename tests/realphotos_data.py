@@ -22,7 +22,7 @@ from tracking.anchors.detect import ArucoDetection
 from tracking.anchors.model import build_models, square_corners
 from tracking.camera import Camera
 from tracking.poses import invert, rotation_angle
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 DATA = Path(__file__).resolve().parent / "data" / "realphotos"
 DICT_FILE = DATA / "opencv" / "tutorial_dict.yml"

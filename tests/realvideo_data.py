@@ -17,7 +17,7 @@ import cv2
 from tracking.camera import Camera
 from tracking.default_intrinsics import estimated_camera
 from tracking.evaluation_real import RealSequence, photo_frames, video_frames
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 DATA = Path(__file__).resolve().parent / "data" / "realvideo"
 

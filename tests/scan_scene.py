@@ -15,7 +15,7 @@ so "up" is -z; metres):
 The camera orbits the vase at two elevations looking at its middle. Images are
 rendered with pyrender offscreen (unlit textures: a Lambertian surface under
 ambient light, so colours do not change with the view) and written through
-tracking.recorder.RecordingWriter (lossless FFV1 when available) with
+tracking.recording.writer.RecordingWriter (lossless FFV1 when available) with
 groundtruth.tum. Ground-truth depth maps are returned on request (the
 benchmark's ceiling peer fuses them) and, with `with_depth=True`, written as
 the recording's depth stream (16-bit PNG, millimetres: what a depth camera's
@@ -34,7 +34,7 @@ from PIL import Image
 import trimesh
 
 from tracking.camera import Camera
-from tracking.recorder import RecordingWriter
+from tracking.recording.writer import RecordingWriter
 
 # vase geometry (metres)
 VASE_HEIGHT = 0.060

@@ -17,7 +17,7 @@ from tracking.anchors.diagnose import suggestion_line, why_line, why_untracked
 from tracking.anchors.discover import Discovery, board_from_markers
 from tracking.anchors.render import look_at, render_view
 from tracking.camera import Camera
-from tracking.session import load_session, parse_anchors
+from tracking.recording.schema import load_session, parse_anchors
 
 REPO = Path(__file__).resolve().parents[1]
 REALVIDEO = REPO / "tests" / "data" / "realvideo"

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from arapp.commands import markers as markers_cmd
-from arapp.guidance import distance_range_m, looking_for
-from arapp.placement import world_from_placement
+from arapp.app.guidance import distance_range_m, looking_for
+from arapp.geometry.placement import world_from_placement
 from tracking.anchors import AnchorTracker
 from tracking.anchors.kinds import DEFAULT_DICTIONARY, KINDS, AnchorKind, register, square_corners
 from tracking.anchors.model import build_models
@@ -24,7 +24,7 @@ from tracking.camera import Camera
 from tracking.errors import SessionError
 from tracking.poses import from_rvec_tvec, invert
 from tracking.printables import sheet
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 DICT = "DICT_4X4_50"
 

@@ -19,7 +19,7 @@ from tracking.calibration import BoardDetector, BoardSpec
 from tracking.camera import Camera
 from tracking.errors import SessionError
 from tracking.poses import invert
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 DATA = Path(__file__).resolve().parent / "data" / "realvideo"
 CAM = Camera(np.array([[600.0, 0, 319.5], [0, 600.0, 239.5], [0, 0, 1]]), np.zeros(5), 640, 480)

@@ -12,7 +12,7 @@ import pytest
 from tracking.anchors import AnchorTracker
 from tracking.anchors.model import build_models
 from tracking.anchors.occlusion import covered_fraction, is_covered
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 from scenes import SKIN_BGR, marker_side, render_sequence, scene_dict
 from tracking.fusion import Tracker
 

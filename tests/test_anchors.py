@@ -9,7 +9,7 @@ from tracking.anchors.render import look_at, render_view
 from tracking.camera import Camera
 from tracking.errors import SessionError
 from tracking.poses import invert, rotation_angle
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 # board frame: y down, z into the paper; a marker/QR lying on the same sheet: rotated 180 deg about x
 FLIP = np.diag([1.0, -1.0, -1.0, 1.0])

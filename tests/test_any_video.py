@@ -21,7 +21,7 @@ import pytest
 
 from arapp.cli import main
 from tracking.poses import read_tum
-from tracking.session import load_session
+from tracking.recording.schema import load_session
 
 ROOT = Path(__file__).resolve().parents[1]
 ORBIT = ROOT / "recordings" / "board_orbit"
@@ -147,7 +147,7 @@ def test_calibrate_from_a_video_takes_the_board_from_an_anchors_file(tmp_path, c
     from test_calibration import TRUE, views
     from tracking.anchors.render import render_view
     from tracking.camera import Camera
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
 
     block = {"kind": "charuco", "dictionary": "DICT_4X4_50", "squares_x": 6, "squares_y": 4, "square_length": 0.035,
              "marker_length": 0.026, "first_id": 10}

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from arapp.app.session import Session, read_model
-from arapp.placement import Placement
+from arapp.geometry.placement import Placement
 
 ROOT = Path(__file__).resolve().parents[1]
 MODEL = ROOT / "models" / "rational_5x5.json"

@@ -32,11 +32,11 @@ from pathlib import Path
 
 import numpy as np
 
-from arapp.app.commands import Step
-from arapp.app.headless import EventQueue, headless_engine_factory
+from arapp.engine.commands import Step
+from arapp.engine.headless import EventQueue, headless_engine_factory
 from arapp.app.printlink import SerialTarget
 from arapp.app.session import Session
-from arapp.placement import Placement
+from arapp.geometry.placement import Placement
 from arapp.printing import SliceSettings
 from arapp.printing.bed_anchor import bed_from_anchor_measured, save_bed_anchor
 from arapp.printing.link.job import Program
@@ -175,7 +175,7 @@ def fake_session():
 
 
 def test_events_call_their_callbacks_in_order_until_disconnected():
-    from arapp.app.events import Event
+    from arapp.engine.events import Event
 
     ev, calls = Event("x"), []
     first = ev.connect(lambda a: calls.append(("first", a)))
@@ -189,8 +189,8 @@ def test_events_call_their_callbacks_in_order_until_disconnected():
 def test_commands_cross_a_process_boundary_without_the_model():
     import pickle
 
-    from arapp.app import commands as cmd
-    from arapp.placement import Placement
+    from arapp.engine import commands as cmd
+    from arapp.geometry.placement import Placement
 
     place = Placement(30.0, (1.0, 2.0, 0.0), (0.0, 0.0, 45.0))
     c = cmd.SetModel(3, "models/sphere.json", {(0, 1, 1): ((1.0, 2.0, 3.0), 0.5)}, place, "wireframe",
@@ -203,8 +203,8 @@ def test_commands_cross_a_process_boundary_without_the_model():
 
 
 def test_the_session_keeps_a_typed_placement_and_tells_the_engine():
-    from arapp.app import commands as cmd
-    from arapp.placement import Placement
+    from arapp.engine import commands as cmd
+    from arapp.geometry.placement import Placement
 
     session, engines = fake_session()
     seen = []

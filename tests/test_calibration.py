@@ -7,7 +7,7 @@ from tracking.anchors.render import look_at, render_view
 from tracking.calibration import BoardSpec, ViewCollector, solve
 from tracking.camera import Camera
 from tracking.errors import CalibrationError
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 TRUE = Camera([[610.0, 0, 322.0], [0, 605.0, 236.0], [0, 0, 1]], [-0.12, 0.06, 0.0005, -0.0008, 0.0], 640, 480)
 CHARUCO = {"kind": "charuco", "dictionary": "DICT_5X5_100", "squares_x": 7, "squares_y": 5,

@@ -17,7 +17,7 @@ import pytest
 from arapp.cli import main
 from tracking.camera import Camera
 from tracking.errors import CalibrationError
-from tracking.session import load_session
+from tracking.recording.schema import load_session
 
 DATA = Path(__file__).resolve().parent / "data" / "realvideo"
 K = [[500.0, 0.0, 31.5], [0.0, 505.0, 23.5], [0.0, 0.0, 1.0]]

@@ -149,7 +149,7 @@ def test_a_poor_set_is_refused_with_what_to_do():
 def test_the_calibrate_command_refuses_a_poor_set_in_one_line_and_writes_nothing(tmp_path, capsys):
     from arapp.cli import main
     from tracking.anchors.render import look_at, render_view
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
 
     an = parse_anchors([{"kind": "charuco", "dictionary": "DICT_5X5_100", "squares_x": 7, "squares_y": 5,
                          "square_length": 0.03, "marker_length": 0.022}])
@@ -166,8 +166,8 @@ def test_the_calibrate_command_refuses_a_poor_set_in_one_line_and_writes_nothing
 
 
 def test_the_wizard_asks_for_the_missing_corners(qtbot):
-    from arapp.calibration_session import CalibrationSession, Feedback, draw_feedback
-    from arapp.gui.calibration_wizard import CalibrationWizard
+    from arapp.app.calibration_session import CalibrationSession, Feedback, draw_feedback
+    from arapp.gui.first_hour.calibration_wizard import CalibrationWizard
 
     session = CalibrationSession()
     session.collector.width, session.collector.height = W, H
@@ -196,7 +196,7 @@ def test_the_real_caliscope_clip_gives_a_calibration_better_than_the_estimate():
 
     from tracking.calibration import BoardSpec, ViewCollector
     from tracking.default_intrinsics import estimated_camera
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
     from tracking.sources import VideoFileSource
 
     data = Path(__file__).resolve().parent / "data" / "realvideo"

@@ -9,7 +9,7 @@ import pytest
 from tracking.camera import Camera
 from tracking.errors import SessionError
 from tracking.poses import invert, pose_to_tum, read_tum, tum_to_pose, write_tum
-from tracking.session import parse_session
+from tracking.recording.schema import parse_session
 
 K = [[612.3, 0.0, 331.7], [0.0, 598.1, 229.2], [0.0, 0.0, 1.0]]
 DIST = [0.12, -0.21, 0.002, -0.001, 0.05]

@@ -10,7 +10,7 @@ from tracking.anchors import AnchorTracker
 from tracking.anchors.dictionaries import aruco_dictionary
 from tracking.camera import Camera
 from tracking.errors import SessionError
-from tracking.session import load_session, parse_anchors
+from tracking.recording.schema import load_session, parse_anchors
 
 
 def write_dictionary(path):

@@ -1,4 +1,4 @@
-"""The live engine's anchor discovery stage (arapp/app/discovery.py): when it looks, how often, when it stops.
+"""The live engine's anchor discovery stage (arapp/engine/discovery.py): when it looks, how often, when it stops.
 
 Oracles: a fake clock and a rule written here (look only after LOST_BEFORE_S without a pose, then at most
 RATE_HZ frames a second); recordings/board_orbit's session.json for what its frames show.
@@ -10,9 +10,9 @@ import cv2
 import numpy as np
 import pytest
 
-from arapp.app.discovery import DiscoveryStage
-from tracking.session import parse_anchors
-from arapp.app.session import DEFAULT_ANCHORS
+from arapp.engine.discovery import DiscoveryStage
+from tracking.recording.schema import parse_anchors
+from arapp.engine.sourcespec import DEFAULT_ANCHORS
 
 
 @pytest.fixture(scope="module")

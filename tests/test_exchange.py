@@ -160,8 +160,12 @@ def _broken_documents(tmp_path: Path) -> dict[str, tuple[Path, str]]:
     frames.write_text("frame,t\n0,0.0\n1,abc\n")
     camera = tmp_path / "cam.yaml"
     camera.write_text("%YAML:1.0\nimage_width: 64\nimage_height: 48\ncamera_matrix: [1, 2]\n")
+    scene = tmp_path / "desk.arscene"
+    with zipfile.ZipFile(scene, "w") as z:
+        z.writestr("scene.json", json.dumps({"format": "arapp-scene", "version": "two"}))
     return {"model": (model, "color[2]"), "printer": (printer, "bed.depth"),
-            "session": (rec / "session.json", "fps"), "frames": (frames, ":3"), "camera": (camera, "camera_matrix")}
+            "session": (rec / "session.json", "fps"), "frames": (frames, ":3"), "camera": (camera, "camera_matrix"),
+            "scene": (scene, "version")}
 
 
 def test_every_document_reader_names_the_file_and_the_field(tmp_path):

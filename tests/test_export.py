@@ -1,5 +1,6 @@
 """The model as displayed, exported for printing: mm, +Z out of the paper, on the bed, watertight; STL and 3MF."""
 
+import dataclasses
 import struct
 import zipfile
 
@@ -23,10 +24,10 @@ def test_trimesh_is_dropped_and_centred_on_the_bed():
 
 
 def test_placement_scales_and_turns_about_the_anchor_normal():
-    from arapp.placement import placement_from_any
+    from arapp.geometry.placement import Placement
 
     mesh = trimesh.creation.box(extents=(2.0, 1.0, 0.5))  # model units
-    out = placed_solid(mesh, placement_from_any({"size_mm": 80.0, "rotation_deg": 90.0}))
+    out = placed_solid(mesh, Placement.from_any({"size_mm": 80.0, "rotation_deg": 90.0}))
     # largest horizontal extent becomes 80 mm; a quarter turn about +Z swaps x and y
     assert out.extents == pytest.approx([40.0, 80.0, 20.0])
     assert out.bounds[0, 2] == pytest.approx(0.0)
@@ -51,7 +52,7 @@ def test_geometry_model_keeps_its_displayed_size_and_up(repo_root):
     from arapp.geometry import load_model
 
     model = load_model(repo_root / "models" / "torus.json")
-    out = placed_solid(model, {"size_mm": 60.0})
+    out = placed_solid(model, dataclasses.replace(model.placement, size_mm=60.0))
     assert out.is_watertight and out.volume > 0
     assert out.bounds[0, 2] == pytest.approx(0.0, abs=1e-6)
     # as displayed on the marker: the model's placement map (model units -> marker mm, +Z out of the paper)

@@ -2,7 +2,7 @@
 error dialogs, the screenshot flag.
 
 A short synthetic recording with known camera poses is written once per
-session by tracking.recorder; overlay pixels are checked against
+session by tracking.recording.writer; overlay pixels are checked against
 cv2.projectPoints of the model's own vertices at the tracker's pose.
 """
 
@@ -57,7 +57,7 @@ def overlay_mask(shown) -> np.ndarray:
 def projected_mask(w, shown, model=None) -> tuple[np.ndarray, np.ndarray]:
     """Filled silhouette of the displayed mesh by cv2.projectPoints at the pose the frame was drawn with,
     and the projected vertices (`model`: the model as placed, default the window's)."""
-    from arapp.placement import world_from_model
+    from arapp.geometry.placement import world_from_model
     from tracking.poses import invert
 
     info = w.source_info
@@ -273,7 +273,7 @@ def test_corrupt_model_file_gives_its_dialog(qtbot, window, tmp_path):
 
 
 def test_missing_camera_gives_its_dialog(qtbot, window):
-    from arapp.app.sourcespec import open_spec
+    from arapp.engine.sourcespec import open_spec
 
     spec = "v4l2:/dev/video63"
     with pytest.raises((ValueError, OSError, RuntimeError)) as expected:
@@ -364,7 +364,7 @@ def test_print_dialog_slices_saves_and_reports_a_printer_error(qtbot, window, tm
 
 def test_source_picker_lists_cameras_and_opens_a_recent_source(qtbot, window, recording):
     from arapp.gui.source_dialog import SourceDialog
-    from arapp.app.sourcespec import list_devices
+    from arapp.engine.sourcespec import list_devices
     from tracking.sources import list_depthai, list_v4l2
 
     expected = [d["spec"] for d in list_v4l2()] + [d["spec"] for d in list_depthai()]
@@ -403,7 +403,7 @@ def test_drag_and_drop_opens_models_and_recordings(qtbot, window, recording):
 
 
 def test_selected_control_point_is_ringed_in_the_view(qtbot, window, recording):
-    from arapp.placement import world_from_model
+    from arapp.geometry.placement import world_from_model
     from tracking.poses import invert
 
     window.open_source(str(recording))
@@ -445,7 +445,7 @@ def test_dragging_on_the_view_places_the_model(qtbot, window, recording):
     from PySide6.QtCore import QPoint, QPointF
     from PySide6.QtGui import QWheelEvent
 
-    from arapp.placement import world_from_placement
+    from arapp.geometry.placement import world_from_placement
 
     window.open_source(str(recording))
     window.open_model(str(MODELS / "sphere.json"))

@@ -10,7 +10,8 @@ import cv2
 import pytest
 from PySide6.QtCore import Qt
 
-from arapp.app import discovery, source_anchors
+from arapp.engine import discovery
+from arapp.app import source_anchors
 
 N_FRAMES = 75   # 2.5 s: a plain video does not loop, and the hint shows after 1 s of being lost
 

@@ -27,7 +27,7 @@ def config_dir(tmp_path, monkeypatch):
 
 @pytest.fixture()
 def setup(qtbot):
-    from arapp.gui.printer_setup import PrinterSetupDialog
+    from arapp.gui.print.printer_setup import PrinterSetupDialog
 
     dlg = PrinterSetupDialog(ports=PORTS)
     qtbot.addWidget(dlg)
@@ -72,7 +72,7 @@ def test_marker_centre_saved_into_a_profile_written_from_the_preset(qtbot, setup
     assert setup.profile.currentData() == str(path)
     assert "bed marker set up" in setup.profile_info.text()
     setup.save_button.click()
-    from arapp.gui.printer_setup import saved_choice
+    from arapp.gui.print.printer_setup import saved_choice
     from arapp.printing.connection_check import saved_profile
 
     assert saved_choice()["profile"] == str(path)

@@ -52,7 +52,7 @@ def assert_close_to(cam: Camera, truth: Camera):
 
 
 def test_session_recovers_the_recordings_camera(charuco_recording):
-    from arapp.calibration_session import CalibrationSession, collect_from_source
+    from arapp.app.calibration_session import CalibrationSession, collect_from_source
 
     folder, truth = charuco_recording
     session = CalibrationSession()
@@ -68,7 +68,7 @@ def test_session_recovers_the_recordings_camera(charuco_recording):
 
 
 def test_collecting_stops_when_cancelled(charuco_recording):
-    from arapp.calibration_session import CalibrationSession, collect_from_source
+    from arapp.app.calibration_session import CalibrationSession, collect_from_source
 
     cancel = threading.Event()
     session = CalibrationSession()
@@ -83,7 +83,7 @@ def test_collecting_stops_when_cancelled(charuco_recording):
 
 
 def test_verdict_rule():
-    from arapp.calibration_session import verdict
+    from arapp.app.calibration_session import verdict
 
     assert verdict(0.3, 0.7, 0.8)[0] == "good"
     q, advice = verdict(0.3, 0.2, 0.8)
@@ -92,7 +92,7 @@ def test_verdict_rule():
 
 
 def test_board_sheet_is_found_by_opencvs_charuco_detector(tmp_path):
-    from arapp.calibration_session import DEFAULT_BOARD, write_board_sheet
+    from arapp.app.calibration_session import DEFAULT_BOARD, write_board_sheet
 
     paths = write_board_sheet(tmp_path)
     png = next(p for p in paths if p.suffix == ".png")
@@ -107,8 +107,8 @@ def test_board_sheet_is_found_by_opencvs_charuco_detector(tmp_path):
 
 
 def test_wizard_calibrates_saves_and_the_camera_is_used_next_time(qtbot, charuco_recording, config_dir):
-    from arapp import camera_store
-    from arapp.gui.calibration_wizard import CalibrationWizard
+    from arapp.store import camera_store
+    from arapp.gui.first_hour.calibration_wizard import CalibrationWizard
 
     folder, truth = charuco_recording
     video = next(p for p in folder.iterdir() if p.suffix in (".avi", ".mkv", ".mp4"))
@@ -148,8 +148,8 @@ def test_wizard_calibrates_saves_and_the_camera_is_used_next_time(qtbot, charuco
 
 
 def test_wizard_cancel_drops_the_running_solve(qtbot, charuco_recording, config_dir):
-    from arapp.calibration_session import CalibrationSession, collect_from_source
-    from arapp.gui.calibration_wizard import CalibrationWizard
+    from arapp.app.calibration_session import CalibrationSession, collect_from_source
+    from arapp.gui.first_hour.calibration_wizard import CalibrationWizard
 
     session = CalibrationSession()
     with RecordingSource(charuco_recording[0]) as src:
@@ -167,7 +167,7 @@ def test_wizard_cancel_drops_the_running_solve(qtbot, charuco_recording, config_
 def test_wizard_says_why_a_camera_cannot_be_opened(qtbot, config_dir):
     from tracking.sources import open_source
 
-    from arapp.gui.calibration_wizard import CalibrationWizard
+    from arapp.gui.first_hour.calibration_wizard import CalibrationWizard
 
     wiz = CalibrationWizard(lambda: open_source("v4l2:/dev/video99"))
     qtbot.addWidget(wiz)

@@ -79,7 +79,7 @@ def test_calibrate_opens_the_wizard_on_the_open_video_and_reopens_it(qtbot, wind
 
 
 def test_calibrate_with_nothing_to_calibrate_says_so(window, monkeypatch):
-    import arapp.app.sourcespec as ss
+    import arapp.engine.sourcespec as ss
 
     monkeypatch.setattr(ss, "list_devices", lambda: [])
     shown = []

@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 
 @pytest.fixture()
@@ -72,7 +72,7 @@ def test_video_without_calibration_gets_the_estimated_camera(plain_video, config
     from tracking.default_intrinsics import estimated_camera
     from tracking.sources import open_source
 
-    from arapp import camera_store
+    from arapp.store import camera_store
 
     src = open_source(str(plain_video))
     assert not src.has_camera
@@ -87,7 +87,7 @@ def test_a_stored_calibration_wins_over_the_estimate_and_scales(plain_video, con
     from tracking.camera import Camera
     from tracking.sources import open_source
 
-    from arapp import camera_store
+    from arapp.store import camera_store
 
     stored = Camera([[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]], [-0.1, 0.01, 0, 0, 0], 640, 480)
     path = camera_store.save_camera("video:clip.avi", stored, rms_px=0.3)
@@ -103,7 +103,7 @@ def test_a_stored_calibration_wins_over_the_estimate_and_scales(plain_video, con
 def test_a_source_with_its_own_calibration_is_left_alone(repo_root, config_dir):
     from tracking.sources import open_source
 
-    from arapp import camera_store
+    from arapp.store import camera_store
 
     src = open_source(str(repo_root / "recordings" / "board_orbit"))
     K = src.camera.K.copy()
@@ -115,7 +115,7 @@ def test_a_source_with_its_own_calibration_is_left_alone(repo_root, config_dir):
 def test_the_gui_opens_a_plain_video_without_a_calibration_file(plain_video, config_dir):
     """`arapp gui --source v4l2:0` failed with 'pass --calibration cam.yaml'; a plain video did too."""
     try:
-        from arapp.app import sourcespec  # after the app-model refactor
+        from arapp.engine import sourcespec  # after the app-model refactor
     except ImportError:
         from arapp.gui import sourcespec
 
@@ -127,7 +127,7 @@ def test_the_gui_opens_a_plain_video_without_a_calibration_file(plain_video, con
 # -- what the app looks for ----------------------------------------------------------------------
 
 def test_looking_for_names_the_marker_as_printed():
-    from arapp.guidance import looking_for
+    from arapp.app.guidance import looking_for
 
     anchors = parse_anchors([{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 40, "length": 0.05}])
     assert looking_for(anchors) == "Looking for ArUco id 40, DICT_4X4_50, 50 mm"
@@ -142,7 +142,7 @@ def test_looking_for_names_the_marker_as_printed():
 def test_lost_hint_distances_hold_against_projectpoints():
     from tracking.default_intrinsics import estimated_camera
 
-    from arapp.guidance import MIN_MARKER_PX, distance_range_m, lost_hint
+    from arapp.app.guidance import MIN_MARKER_PX, distance_range_m, lost_hint
 
     spec = parse_anchors([{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 40, "length": 0.05}])[0]
     cam = estimated_camera(640, 480)
@@ -164,7 +164,7 @@ def test_lost_hint_distances_hold_against_projectpoints():
 # -- the welcome view ------------------------------------------------------------------------------
 
 def test_welcome_view_offers_the_first_steps(qtbot, repo_root):
-    from arapp.gui.welcome import WelcomeView, bundled_recordings
+    from arapp.gui.first_hour.welcome import WelcomeView, bundled_recordings
 
     recs = bundled_recordings()
     names = [p.split("/")[-1] for p, _ in recs]
@@ -188,7 +188,7 @@ def test_welcome_view_offers_the_first_steps(qtbot, repo_root):
 
 
 def test_lost_hint_shows_after_a_second_of_lost_tracking(qtbot):
-    from arapp.gui.welcome import LostHint
+    from arapp.gui.first_hour.welcome import LostHint
 
     anchors = parse_anchors([{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 40, "length": 0.05}])
     hint = LostHint(delay_s=1.0)
@@ -207,7 +207,7 @@ def test_help_lists_the_windows_shortcuts_and_about(qtbot, config_dir):
     from PySide6.QtGui import QAction, QKeySequence
     from PySide6.QtWidgets import QMainWindow
 
-    from arapp.gui.help import ShortcutsDialog, about_text, add_help_menu, shortcuts
+    from arapp.gui.first_hour.help import ShortcutsDialog, about_text, add_help_menu, shortcuts
 
     win = QMainWindow()
     qtbot.addWidget(win)
@@ -231,10 +231,10 @@ def test_help_lists_the_windows_shortcuts_and_about(qtbot, config_dir):
 
 def test_first_hour_dialogs_fit_a_1366x768_screen(qtbot, config_dir):
     """Each of these windows can be made small enough for a 768 px screen (less a panel and title bar)."""
-    from arapp.gui.calibration_wizard import CalibrationWizard
-    from arapp.gui.help import ShortcutsDialog
-    from arapp.gui.printer_setup import PrinterSetupDialog
-    from arapp.gui.welcome import WelcomeView
+    from arapp.gui.first_hour.calibration_wizard import CalibrationWizard
+    from arapp.gui.first_hour.help import ShortcutsDialog
+    from arapp.gui.print.printer_setup import PrinterSetupDialog
+    from arapp.gui.first_hour.welcome import WelcomeView
 
     for w in (CalibrationWizard(lambda: None), PrinterSetupDialog(ports=[]), WelcomeView(),
               ShortcutsDialog([("F1", "Keyboard shortcuts")] * 30)):
@@ -247,7 +247,7 @@ def test_calibration_banner_shows_only_for_the_estimated_camera(qtbot):
     from tracking.camera import Camera
     from tracking.default_intrinsics import estimated_camera
 
-    from arapp.gui.welcome import CalibrationBanner
+    from arapp.gui.first_hour.welcome import CalibrationBanner
 
     banner = CalibrationBanner()
     qtbot.addWidget(banner)

@@ -1,5 +1,5 @@
 """The shared-memory hand-over of display frames from the pipeline child process to the UI
-(arapp.gui.frame_ring, arapp.gui.remote): frames arrive intact, a frame nobody took is dropped and its
+(arapp.gui.hosts.frame_ring, arapp.gui.hosts.remote): frames arrive intact, a frame nobody took is dropped and its
 slot freed, and no /dev/shm segment outlives a stop or a killed child."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from arapp.gui.frame_ring import FrameRing, RingReader
+from arapp.gui.hosts.frame_ring import FrameRing, RingReader
 
 SHAPE = (90, 160, 4)
 
@@ -90,8 +90,59 @@ def test_a_full_ring_drops_the_frame_until_a_slot_is_released():
     assert not segment_exists(ring.name)
 
 
+def test_a_claimed_slot_is_written_in_place_and_never_handed_out_twice():
+    """The child's processing thread writes the display picture into a claimed slot itself (no copy):
+    what it writes there is what the UI reads; a claimed slot is not claimed again until published and
+    released, or abandoned; an abandoned one is free again."""
+    ring = FrameRing(int(np.prod(SHAPE)), count=2)
+    try:
+        reader = RingReader(ring.name, ring.slot_bytes, ring.count)
+        a, view_a = ring.claim(SHAPE)
+        b, _ = ring.claim(SHAPE)
+        assert a != b and ring.claim(SHAPE) is None and ring.dropped == 1  # both being written
+        view_a[...] = pattern(7)
+        ring.publish(a)
+        assert reader.flags[a] == 1 and np.array_equal(reader.view(a, SHAPE), pattern(7))
+        ring.abandon(b)
+        assert ring.claim(SHAPE)[0] == b  # free again; a stays held by the UI
+        with pytest.raises(ValueError, match="does not fit"):
+            ring.claim((SHAPE[0] + 1,) + SHAPE[1:])
+    finally:
+        del view_a
+        ring.close()
+    assert not segment_exists(ring.name)
+
+
+@pytest.mark.skipif(not hasattr(os, "setpriority") or not Path("/proc/self/task").is_dir(),
+                    reason="per-thread niceness (Linux)")
+def test_background_threads_of_the_pipeline_process_are_niced_and_the_rest_not():
+    """The child renices work no frame waits for (SLAM mapping, discovery, ...) once, the capture and
+    processing threads keep the process's priority; read back from /proc, not from the code under test."""
+    import threading
+
+    from arapp.gui.hosts.remote import BACKGROUND_NICE, renice_background
+
+    def nice_of(tid: int) -> int:
+        return int(Path(f"/proc/self/task/{tid}/stat").read_text().rsplit(")", 1)[1].split()[16])
+
+    stop = threading.Event()
+    mapping = threading.Thread(target=stop.wait, name="slam-mapping", daemon=True)
+    processing = threading.Thread(target=stop.wait, name="arapp-process", daemon=True)
+    mapping.start()
+    processing.start()
+    try:
+        base = nice_of(threading.get_native_id())
+        done: set[int] = set()
+        renice_background(done)
+        assert nice_of(mapping.native_id) == min(19, base + BACKGROUND_NICE)
+        assert nice_of(processing.native_id) == base
+        assert mapping.native_id in done and processing.native_id not in done
+    finally:
+        stop.set()
+
+
 def _meta(i: int, slot: int) -> dict:
-    from arapp.gui.remote import STATE_KEYS
+    from arapp.gui.hosts.remote import STATE_KEYS
 
     return {"index": i, "t": i / 30.0, "state": "lost", "markers": 0, "inliers": 0, "ms_track": 1.0,
             "ms_render": 1.0, "pose": None, "captured_at": 0.0, "processed_at": 0.0, "dropped": 0,
@@ -99,7 +150,7 @@ def _meta(i: int, slot: int) -> dict:
 
 
 def test_remote_engine_drops_stale_frames_and_frees_their_slots(qtbot):
-    from arapp.gui.remote import RemoteEngine
+    from arapp.gui.hosts.remote import RemoteEngine
 
     ring = FrameRing(int(np.prod(SHAPE)), count=4)
     try:
@@ -131,7 +182,7 @@ def test_remote_engine_drops_stale_frames_and_frees_their_slots(qtbot):
 def test_a_real_child_leaves_no_segment_behind(qtbot, tmp_path, ending):
     from gui_helpers import ANCHORS, TIMEOUT_MS, write_arc_recording
 
-    from arapp.gui.remote import RemoteEngine
+    from arapp.gui.hosts.remote import RemoteEngine
 
     before = set(os.listdir("/dev/shm"))
     rec = write_arc_recording(tmp_path / "arc", n=6)

@@ -205,7 +205,7 @@ def test_screenshot_is_the_composited_view(qtbot, window, recording, tmp_path):
 
 def projected_box_mask(model, anchor, camera, world_from_camera, shape) -> np.ndarray:
     """The convex hull of the placed model's bounding box corners, projected with cv2.projectPoints."""
-    from arapp.placement import world_from_model
+    from arapp.geometry.placement import world_from_model
     from tracking.poses import invert
 
     lo, hi = np.asarray(model.bounds()[0], float), np.asarray(model.bounds()[1], float)
@@ -347,7 +347,7 @@ def test_one_time_format():
 def test_temperature_graph_has_a_time_axis_and_readings_off_the_lines(qtbot):
     from PySide6.QtGui import QColor, QImage
 
-    from arapp.gui.temperature_graph import TemperatureGraph, time_ticks
+    from arapp.gui.print.temperature_graph import TemperatureGraph, time_ticks
 
     g = TemperatureGraph()
     qtbot.addWidget(g)

@@ -1,7 +1,8 @@
 """Detected markers outlined with their axes (pytest-qt, offscreen): with View > Show detected markers on,
 the view's pixels along the marker's edges (found by OpenCV's own ArucoDetector on the frame as
 captured) change colour; off, they stay the frame's. The 2-D primitives are checked against
-cv2.projectPoints of the marker's corners at the same pose."""
+cv2.projectPoints of the marker's corners at the same pose. The engine draws the marks into the picture
+it hands over to the view, under the model, and not into the full-size composite (AR videos)."""
 
 from __future__ import annotations
 
@@ -19,8 +20,8 @@ TIMEOUT_MS = 30000
 def recording(tmp_path_factory):
     from tracking.anchors.render import look_at, render_view
     from tracking.camera import Camera
-    from tracking.recorder import RecordingWriter
-    from tracking.session import parse_anchors
+    from tracking.recording.writer import RecordingWriter
+    from tracking.recording.schema import parse_anchors
 
     folder = tmp_path_factory.mktemp("marks") / "still"
     cam = Camera(np.array([[560.0, 0, 319.5], [0, 560.0, 239.5], [0, 0, 1]]), np.zeros(5), 640, 480)
@@ -69,9 +70,21 @@ def changed_at(a: np.ndarray, b: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
-def test_detected_marker_outlined_when_on_and_not_when_off(qtbot, window, recording):
-    from arapp.app.overlay_marks import marker_marks
+def set_marks(qtbot, window, on: bool) -> np.ndarray:
+    """Toggle View > Show detected markers while paused; the view's picture once the engine has drawn the
+    paused frame again with the new setting."""
+    before = window.session.last_shown
+    window.marker_marks_action.setChecked(on)
+    qtbot.waitUntil(lambda: window.session.last_shown is not before, timeout=TIMEOUT_MS)
+    qtbot.wait(50)
+    return grab_rgb(window.view)
 
+
+@pytest.mark.parametrize("engine", ["threads", "process"])
+def test_detected_marker_outlined_when_on_and_not_when_off(qtbot, window, recording, engine):
+    from arapp.engine.overlay_marks import marker_marks
+
+    window.engine_kind = engine  # the in-process engine, and the shipped child-process one
     assert window.marker_marks_action.isChecked()  # default on
     window.open_source(str(recording))
     qtbot.waitUntil(lambda: window.session.last_shown is not None
@@ -94,29 +107,28 @@ def test_detected_marker_outlined_when_on_and_not_when_off(qtbot, window, record
     assert np.abs(np.sort(marks.quads[0], 0) - np.sort(ref.reshape(4, 2), 0)).max() < 0.01
 
     pts = to_widget(window, edge_samples(frame), frame.shape)
-    window.marker_marks_action.setChecked(False)
-    qtbot.wait(100)
-    off = grab_rgb(window.view)
-    window.marker_marks_action.setChecked(True)
-    qtbot.wait(100)
-    on = grab_rgb(window.view)
-    window.marker_marks_action.setChecked(False)
-    qtbot.wait(100)
-    off_again = grab_rgb(window.view)
+    first = grab_rgb(window.view)  # on from the source's first frame
+    off = set_marks(qtbot, window, False)
+    on = set_marks(qtbot, window, True)
+    marked = window.session.last_shown
+    # only the view's picture has them: the full-size composite (AR videos) is the frame itself
+    assert np.array_equal(marked.result.image, marked.frame)
+    off_again = set_marks(qtbot, window, False)
 
     # on: the outline's colour along every edge; off: the same picture as before
     assert (changed_at(off, on, pts) > 60).mean() >= 0.9
+    assert (changed_at(off, first, pts) > 60).mean() >= 0.9
     assert changed_at(off, off_again, pts).max() <= 2
 
 
 def test_marks_only_for_markers_in_the_frame_and_none_without_detection():
     """Headless: a board seen so that its right column leaves the frame gets outlines for the markers
     wholly inside only (checked with cv2.projectPoints); no marker detected, or no pose: nothing."""
-    from arapp.app.overlay_marks import marker_marks
+    from arapp.engine.overlay_marks import marker_marks
     from tracking.anchors.model import build_models
     from tracking.anchors.render import look_at
     from tracking.camera import Camera
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
 
     anchors = parse_anchors([{"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3,
                               "marker_length": 0.04, "separation": 0.01, "first_id": 0}])
@@ -141,11 +153,12 @@ def test_marks_only_for_markers_in_the_frame_and_none_without_detection():
 
 def test_marks_lie_under_the_model(qtbot, window, recording):
     """The vase stands on the marker: along the marker's edges, where the model is drawn (the composite
-    differs from the frame as captured: the renderer's own picture, not the marks' silhouette) the view
-    with marks on shows the same pixels as with marks off; elsewhere the outline shows."""
+    with marks off differs from the frame as captured: the renderer's own picture) the view with marks on
+    shows the same pixels as with marks off; elsewhere the outline shows."""
     window.open_model("models/vase.json")
     qtbot.waitUntil(lambda: window.model is not None, timeout=TIMEOUT_MS)
     window.model_panel.size.setValue(70.0)  # before the source: every frame shows this size
+    window.marker_marks_action.setChecked(False)
     window.open_source(str(recording))
     qtbot.waitUntil(lambda: window.session.last_shown is not None
                     and window.session.last_shown.result.state == "marker"
@@ -166,37 +179,42 @@ def test_marks_lie_under_the_model(qtbot, window, recording):
     under, clear = inner[ij[:, 1], ij[:, 0]], outer[ij[:, 1], ij[:, 0]]
     assert under.sum() >= 10 and clear.sum() >= 20, (under.sum(), clear.sum())
     pts = to_widget(window, samples, frame.shape)
-    window.marker_marks_action.setChecked(False)
-    qtbot.wait(100)
     off = grab_rgb(window.view)
-    window.marker_marks_action.setChecked(True)
-    qtbot.wait(100)
-    on = grab_rgb(window.view)
+    on = set_marks(qtbot, window, True)
     change = changed_at(off, on, pts)
     assert change[under].max() <= 3, change[under]  # the model, not the outline, where it covers the edge
     assert (change[clear] > 60).mean() >= 0.9  # the outline where the paper is seen
 
 
-def test_silhouette_is_the_union_of_the_triangles():
-    """Headless: overlapping triangles (a vase's walls seen through its opening) cover their union, not
-    the even-odd pattern cv2.fillPoly would make. The oracle: each triangle drawn by cv2.fillConvexPoly
-    at 8 times the resolution (one after another: a union), read at the cells' centres."""
-    from arapp.app.overlay_marks import fill_triangles
+def test_marks_are_drawn_at_the_views_scale_and_under_the_model_as_the_mode_lets_through():
+    """Headless: a horizontal outline edge across a frame half covered by a 'model' (the composite differs
+    from the frame on the right half). In a picture at half the frame's size the line lands at half the
+    frame position, OUTLINE_PX wide; where the model is, shaded keeps the model's pixels and a see-through
+    mode mixes in `under` of the outline's colour (the rule under_opacity states)."""
+    from arapp.engine.overlay_marks import OUTLINE_RGB, MarkerMarks, draw_marks, under_opacity
 
-    rng = np.random.default_rng(3)
-    centres = rng.uniform(10, 50, (60, 1, 2))
-    tri = centres + rng.uniform(-8, 8, (60, 3, 2))
-    got = fill_triangles(tri, (64, 64))
-    fine = np.zeros((512, 512), np.uint8)
-    for t in tri:
-        cv2.fillConvexPoly(fine, np.round((t * 8 - 0.5) * 16).astype(np.int32), 1, cv2.LINE_8, 4)
-    ref = fine[4::8, 4::8]
-    even_odd = np.zeros_like(fine)
-    cv2.fillPoly(even_odd, list(np.round((tri * 8 - 0.5) * 16).astype(np.int32)), 1, cv2.LINE_8, 4)
-    k = np.ones((3, 3), np.uint8)
-    edge = cv2.dilate(ref, k) != cv2.erode(ref, k)
-    touched = fine.reshape(64, 8, 64, 8).max(axis=(1, 3)) > 0  # a sliver's own cell (its centroid's)
-    # they differ only in cells next to an edge (centres on it) or a sliver's cell
-    assert not ((got != ref) & ~edge & ~((got > 0) & touched)).any()
-    assert (got != ref).mean() < 0.02
-    assert (even_odd[4::8, 4::8] != ref).mean() > 0.03  # the rule it avoids does differ here (4 %)
+    frame = np.full((200, 400, 3), 90, np.uint8)
+    composite = frame.copy()
+    composite[:, 200:] = (30, 160, 30)  # the model over the right half
+    marks = MarkerMarks(400, 200, quads=[np.array([[40.0, 100.0], [360.0, 100.0], [360.0, 100.0], [40.0, 100.0]])])
+    cyan_bgra = np.array(OUTLINE_RGB[::-1] + (255,))
+
+    def picture(mode):
+        display = cv2.cvtColor(cv2.resize(composite, (200, 100), interpolation=cv2.INTER_LINEAR),
+                               cv2.COLOR_BGR2BGRA)
+        plain = display.copy()
+        draw_marks(display, marks, composite, frame, under_opacity(mode))
+        return plain, display
+
+    plain, shaded = picture("shaded")
+    row = np.abs(shaded.astype(int) - plain.astype(int)).max(axis=2)
+    assert (row[:, 30:90].max(axis=1) > 100).sum() in (2, 3)  # OUTLINE_PX wide, antialiased
+    assert row[48:52, 30:90].min() > 0 and row[:45].max() == 0 and row[56:].max() == 0  # at y = 100 / 2
+    assert np.abs(shaded[49:51, 30:90].astype(int) - cyan_bgra).max() <= 60
+    assert row[:, 105:170].max() == 0  # under the shaded model: the model's own pixels
+    _, see_through = picture("translucent")
+    u = under_opacity("translucent")
+    assert 0 < u < 1
+    want = plain[49:51, 105:170].astype(float) + u * (shaded[49:51, 30:90].mean(axis=1, keepdims=True)
+                                                       - plain[49:51, 105:170])
+    assert np.abs(see_through[49:51, 105:170].astype(float) - want).max() <= 25

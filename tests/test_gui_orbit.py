@@ -41,7 +41,7 @@ def projected_box(orbit_view, vertices) -> np.ndarray:
 
 
 def model_pixels(rgb: np.ndarray) -> np.ndarray:
-    from arapp.gui.orbit_view import BACKGROUND_BGR
+    from arapp.gui.overlays.orbit_view import BACKGROUND_BGR
 
     bg = np.array(BACKGROUND_BGR[::-1], int)
     return np.abs(rgb.astype(int) - bg).max(axis=2) > 20

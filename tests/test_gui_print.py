@@ -97,7 +97,7 @@ def drawn_toolpaths(window):
 
 def magenta_pixels(shown) -> int:
     """Pixels of the composite in the highlight colour (CURRENT_COLOUR) that the captured frame lacks."""
-    from arapp.toolpath_overlay import CURRENT_COLOUR
+    from arapp.engine.toolpath_overlay import CURRENT_COLOUR
 
     bgr = np.array(CURRENT_COLOUR[2::-1]) * 255
     img = shown.result.image.astype(int)
@@ -248,7 +248,7 @@ def test_printer_halt_shows_the_printers_message_and_the_job_file(qtbot, window,
 @pytest.mark.parametrize("engine", ["process", "threads"])
 def test_preview_layer_slider_scrubs_the_bed_overlay(qtbot, window, tmp_path, bed_profile, engine):
     from arapp.printing.gcode import parse_gcode
-    from arapp.toolpath_overlay import KIND_COLOURS
+    from arapp.engine.toolpath_overlay import KIND_COLOURS
 
     window.engine_kind = engine  # the child-process pipeline, and the in-process fallback
     window.open_source(str(RECORDING))
@@ -285,7 +285,7 @@ def test_preview_layer_slider_scrubs_the_bed_overlay(qtbot, window, tmp_path, be
 
 
 def outline_pixels(shown) -> int:
-    from arapp.toolpath_overlay import BED_OUTLINE_COLOUR
+    from arapp.engine.toolpath_overlay import BED_OUTLINE_COLOUR
 
     return int(perimeter_pixels(shown, BED_OUTLINE_COLOUR).sum())
 
@@ -305,7 +305,7 @@ def perimeter_pixels_on_gcode(shown, layer, profile_path, rgba) -> float:
 
     from arapp.printing import load_profile
     from tracking.poses import invert
-    from tracking.session import load_session
+    from tracking.recording.schema import load_session
 
     cam = load_session(RECORDING).camera
     bed_from_anchor = load_profile(profile_path).bed_from_anchor
@@ -329,7 +329,7 @@ def perimeter_pixels_on_gcode(shown, layer, profile_path, rgba) -> float:
 def test_build_area_warning_in_the_dialog_and_red_on_the_bed(qtbot, window, tmp_path, bed_profile):
     import json
 
-    from arapp.toolpath_overlay import OUT_OF_BED_COLOUR
+    from arapp.engine.toolpath_overlay import OUT_OF_BED_COLOUR
 
     # a purge line in front of the bed (y = -3 mm), as some printers' start G-code does
     data = json.loads(Path(bed_profile).read_text())
@@ -399,7 +399,7 @@ def test_gui_command_draws_toolpaths_for_a_screenshot(tmp_path, bed_profile):
     import trimesh
 
     from arapp.printing import SliceSettings, load_profile, slice_mesh
-    from arapp.toolpath_overlay import BED_OUTLINE_COLOUR, KIND_COLOURS
+    from arapp.engine.toolpath_overlay import BED_OUTLINE_COLOUR, KIND_COLOURS
 
     profile = load_profile(bed_profile)
     result = slice_mesh(trimesh.creation.box(extents=(24.0, 24.0, 3.0)), SliceSettings(layer_height=0.3), profile)

@@ -14,9 +14,9 @@ from test_gui_print import TIMEOUT_MS, bed_profile, sliced_dialog, window  # noq
 
 def test_print_panel_prints_through_moonraker(qtbot, window, tmp_path, bed_profile, moonraker_server,  # noqa: F811
                                               config_dir):
-    from arapp import user_config
-    from arapp.gui.print_setup_prefill import prefill
-    from arapp.gui.printer_setup import STATE_KEY
+    from arapp.store import user_config
+    from arapp.gui.print.setup_prefill import prefill
+    from arapp.gui.print.printer_setup import STATE_KEY
     from arapp.printing.link import MoonrakerTarget
 
     user_config.remember(STATE_KEY, {"link": "moonraker", "url": moonraker_server.url})

@@ -31,8 +31,8 @@ def print_panel(qtbot, w):
 
 
 def test_octoprint_from_the_setup_uses_the_stored_key(qtbot, window, tmp_path):
-    from arapp import user_config
-    from arapp.gui.bed_anchor_dialog import profile_file_for
+    from arapp.store import user_config
+    from arapp.gui.print.bed_anchor_dialog import profile_file_for
     from arapp.printing import connection_check as cc
     from arapp.printing.link import OctoPrintTarget
     from arapp.printing.link.webapi import load_api_key
@@ -56,7 +56,7 @@ def test_octoprint_from_the_setup_uses_the_stored_key(qtbot, window, tmp_path):
 
 
 def test_serial_port_and_baud_from_the_setup(qtbot, window):
-    from arapp import user_config
+    from arapp.store import user_config
     from arapp.printing.link import SerialTarget
 
     user_config.remember("printer", {"profile": "preset:prusa_mk3s", "link": "serial", "port": "/dev/ttyACM7",

@@ -25,7 +25,7 @@ def window(threads_window):
 
 def model_box_polygon(window, shown) -> np.ndarray:
     """The placed model's bounding box (8 corners) projected by cv2.projectPoints: its convex hull (pixels)."""
-    from arapp.placement import world_from_placement
+    from arapp.geometry.placement import world_from_placement
 
     s = window.session
     model = s.model
@@ -42,8 +42,8 @@ def model_box_polygon(window, shown) -> np.ndarray:
 
 
 def test_preview_without_bed_marker_stands_on_the_model(qtbot, window, tmp_path):
-    from arapp import user_config
-    from arapp.toolpath_overlay import KIND_COLOURS
+    from arapp.store import user_config
+    from arapp.engine.toolpath_overlay import KIND_COLOURS
 
     user_config.remember("printer", {"profile": "preset:prusa_mk3s", "link": "serial", "port": "", "baud": 115200,
                                      "url": ""})

@@ -20,8 +20,8 @@ def window(threads_window):
 
 
 def test_setup_printer_is_sliced_for_and_listed(qtbot, window, tmp_path):
-    from arapp import user_config
-    from arapp.gui.printer_setup import saved_choice
+    from arapp.store import user_config
+    from arapp.gui.print.printer_setup import saved_choice
     from arapp.printing.presets import PRESETS, write_preset
 
     own = write_preset("ender3", user_config.config_dir() / "printers" / "my_ender.json")

@@ -66,7 +66,7 @@ def test_list_ports_describes_and_puts_usb_first(monkeypatch):
 
 
 def test_no_port_is_preselected(qtbot):
-    from arapp.gui.printer_setup import PrinterSetupDialog
+    from arapp.gui.print.printer_setup import PrinterSetupDialog
 
     dlg = PrinterSetupDialog(ports=PORTS)
     qtbot.addWidget(dlg)
@@ -79,7 +79,7 @@ def test_no_port_is_preselected(qtbot):
 
 
 def test_serial_test_reports_the_emulators_firmware(qtbot):
-    from arapp.gui.printer_setup import PrinterSetupDialog
+    from arapp.gui.print.printer_setup import PrinterSetupDialog
 
     dlg = PrinterSetupDialog(ports=PORTS)
     qtbot.addWidget(dlg)
@@ -95,7 +95,7 @@ def test_serial_test_reports_the_emulators_firmware(qtbot):
 
 
 def test_serial_test_of_a_silent_port_gives_up_with_advice(qtbot, monkeypatch):
-    from arapp.gui.printer_setup import PrinterSetupDialog
+    from arapp.gui.print.printer_setup import PrinterSetupDialog
     from arapp.printing import connection_check as cc
 
     monkeypatch.setattr(cc, "SERIAL_CHECK_TIMEOUT_S", 1.0)
@@ -115,7 +115,7 @@ def test_serial_test_of_a_silent_port_gives_up_with_advice(qtbot, monkeypatch):
 
 
 def test_octoprint_key_pasted_once_is_stored_600_and_used(qtbot, octo, config_dir):  # noqa: F811
-    from arapp.gui.printer_setup import PrinterSetupDialog, saved_choice
+    from arapp.gui.print.printer_setup import PrinterSetupDialog, saved_choice
     from arapp.printing.connection_check import octoprint_key_path
 
     url = f"http://127.0.0.1:{octo.server.server_address[1]}"
@@ -149,7 +149,7 @@ def test_octoprint_key_pasted_once_is_stored_600_and_used(qtbot, octo, config_di
 
 
 def test_octoprint_test_against_the_real_server(qtbot, octoprint):  # noqa: F811
-    from arapp.gui.printer_setup import PrinterSetupDialog
+    from arapp.gui.print.printer_setup import PrinterSetupDialog
 
     dlg = PrinterSetupDialog(ports=PORTS)
     qtbot.addWidget(dlg)
@@ -165,7 +165,7 @@ def test_octoprint_test_against_the_real_server(qtbot, octoprint):  # noqa: F811
 
 
 def test_the_printer_and_port_are_remembered(qtbot, tmp_path):
-    from arapp.gui.printer_setup import PrinterSetupDialog
+    from arapp.gui.print.printer_setup import PrinterSetupDialog
     from arapp.printing.presets import write_preset
 
     dlg = PrinterSetupDialog(ports=PORTS)
@@ -187,7 +187,7 @@ def test_the_printer_and_port_are_remembered(qtbot, tmp_path):
 
 
 def test_saved_choice_gives_the_link_target_and_profile(qtbot, octo):  # noqa: F811
-    from arapp.gui.printer_setup import PrinterSetupDialog, saved_choice
+    from arapp.gui.print.printer_setup import PrinterSetupDialog, saved_choice
     from arapp.printing.connection_check import saved_profile, saved_target
     from arapp.printing.link.factory import OctoPrintTarget, SerialTarget, make_link
 

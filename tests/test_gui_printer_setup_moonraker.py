@@ -17,7 +17,7 @@ def _own_config(config_dir):
 
 
 def test_moonraker_test_connection_save_and_reopen(qtbot, moonraker_server, config_dir):
-    from arapp.gui.printer_setup import PrinterSetupDialog, saved_choice
+    from arapp.gui.print.printer_setup import PrinterSetupDialog, saved_choice
     from arapp.printing.connection_check import key_path, saved_target
     from arapp.printing.link import MoonrakerTarget
 

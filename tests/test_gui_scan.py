@@ -31,7 +31,7 @@ def vase_recording(tmp_path_factory):
 def test_scan_fills_the_dome_and_the_mesh_becomes_the_model(qtbot, tmp_path, vase_recording):
     from arapp.app.scan_session import ScanSettings
     from arapp.gui.main_window import MainWindow
-    from arapp.placement import world_from_placement
+    from arapp.geometry.placement import world_from_placement
 
     folder, truth = vase_recording
     settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)

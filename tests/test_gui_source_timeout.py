@@ -43,7 +43,7 @@ def window(threads_window):
 
 def stuck_engines(window, camera: StuckCamera, made: list):
     """A `make_engine` for the window's session: the thread engine over `camera`'s blocking opener."""
-    from arapp.gui.workers import Engine, connect_handlers
+    from arapp.gui.hosts.local import Engine, connect_handlers
 
     def make(spec, *, name, anchors, speed, loop, handlers):
         engine = Engine(opener=camera.open, name=name, anchors=anchors, speed=speed, loop=loop, parent=window)

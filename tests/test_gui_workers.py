@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from arapp.app.slots import LatestSlot
+from arapp.engine.slots import LatestSlot
 
 
 @dataclass
@@ -78,7 +78,7 @@ def test_latest_slot_wakes_a_waiting_consumer():
 
 
 def test_player_paces_at_the_recorded_times_and_speed():
-    from arapp.app.player import Player
+    from arapp.engine.player import Player
 
     slot = LatestSlot()
     src = ListSource(12, fps=30.0)
@@ -96,7 +96,7 @@ def test_player_paces_at_the_recorded_times_and_speed():
 
 
 def test_player_seek_step_and_loop():
-    from arapp.app.player import Player
+    from arapp.engine.player import Player
 
     slot = LatestSlot()
     src = ListSource(20)
@@ -160,8 +160,8 @@ class CountingSource(ListSource):
 
 
 def run_slow_stage(src, on_demand: bool = False) -> tuple[list, LatestSlot, object]:
-    from arapp.app.player import Player
-    from arapp.app.processor import Processor
+    from arapp.engine.player import Player
+    from arapp.engine.processor import Processor
 
     captured, shown = LatestSlot(), LatestSlot()
     ended = threading.Event()
@@ -217,8 +217,8 @@ def test_a_slow_stage_drops_live_frames_instead_of_adding_latency():
 
 
 def test_processor_applies_commands_between_frames_and_redraws_when_paused():
-    from arapp.app.player import Captured
-    from arapp.app.processor import Processor
+    from arapp.engine.player import Captured
+    from arapp.engine.processor import Processor
 
     class Pipeline:
         def __init__(self):
@@ -261,10 +261,10 @@ def test_processor_applies_commands_between_frames_and_redraws_when_paused():
 
 def test_gui_recorder_writes_a_recording_that_replays(tmp_path):
     """The record button's writer: frames handed over from the capture thread come back from the recording."""
-    from arapp.app.recording import GuiRecorder, new_recording_folder
-    from arapp.app.player import Captured
+    from arapp.engine.recording import GuiRecorder, new_recording_folder
+    from arapp.engine.player import Captured
     from tracking.camera import Camera
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
     from tracking.sources import RecordingSource
 
     cam = Camera(np.array([[300.0, 0, 79.5], [0, 300.0, 59.5], [0, 0, 1]]), np.zeros(5), 160, 120)
@@ -298,7 +298,7 @@ def test_gui_recorder_writes_a_recording_that_replays(tmp_path):
 def test_a_camera_lost_mid_stream_is_reported_not_raised():
     """tracking.sources ends a vanished camera's stream with `.error` set; the player turns it into a
     'Camera lost' report with that message and ends cleanly."""
-    from arapp.app.player import Player
+    from arapp.engine.player import Player
 
     class DyingCamera(ListSource):
         kind = "v4l2"

@@ -13,7 +13,7 @@ from tracking.anchors import AnchorTracker
 from tracking.anchors.render import look_at
 from tracking.camera import Camera
 from tracking.poses import from_rvec_tvec, invert, rotation_angle
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 PX_PER_M = 4000.0  # board image resolution: every length below is a whole number of pixels at it
 MARGIN = 40

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tracking.printables import sheet
-from tracking.session import parse_anchor, parse_anchors
+from tracking.recording.schema import parse_anchor, parse_anchors
 
 DPI = 150.0
 PPM = DPI / 0.0254  # pixels per metre

@@ -61,6 +61,6 @@ def test_the_icon_pattern_is_not_a_default_marker():
 
 
 def test_a_recording_keeps_the_dictionary_it_states():
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
     a = parse_anchors([{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 17, "length": 0.05}])[0]
     assert a.dictionary == "DICT_4X4_50" and a.dictionary_id == cv2.aruco.DICT_4X4_50

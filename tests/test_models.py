@@ -173,7 +173,7 @@ def test_cli_errors_exit_nonzero_without_traceback(tmp_path, capsys):
 
 
 def test_placement_accepts_a_single_turn_about_the_marker_normal():
-    from arapp.geometry.model import Placement
+    from arapp.geometry.placement import Placement
 
     p = Placement(size_mm=30, rotation_deg=90)
     assert p.rotation_deg == (0.0, 0.0, 90.0)

@@ -200,8 +200,8 @@ def test_plane_mode_hides_exactly_what_is_below_the_table():
 def test_pipeline_leaves_hidden_pixels_as_the_camera_saw_them(occlusion_recordings):
     """Through the app's pipeline (default: depth because the frame has depth): where the ground truth
     says the hand hides the model, and not near its edge, the output is the camera frame unchanged."""
-    from arapp.pipeline import Pipeline
-    from tracking.session import load_session
+    from arapp.engine.pipeline import Pipeline
+    from tracking.recording.schema import load_session
     from tracking.sources.recording import RecordingSource
 
     rec = occlusion_recordings["test_occlusion_hand"]
@@ -235,7 +235,7 @@ def test_pipeline_leaves_hidden_pixels_as_the_camera_saw_them(occlusion_recordin
 def test_replay_refuses_depth_occlusion_without_depth(tmp_path, capsys):
     from arapp.cli import main
     from tracking.camera import Camera
-    from tracking.recorder import RecordingWriter
+    from tracking.recording.writer import RecordingWriter
 
     cam = Camera(np.array([[300.0, 0, 79.5], [0, 300.0, 59.5], [0, 0, 1]]), None, 160, 120)
     with RecordingWriter(tmp_path / "rec", cam, 10.0) as w:
@@ -281,10 +281,10 @@ class _Engine:
 
 
 def test_the_session_keeps_the_occlusion_choice_and_tells_the_pipeline(occlusion_recordings):
-    from arapp.app import commands as cmd
+    from arapp.engine import commands as cmd
     from arapp.app.session import MemorySettings, Session
-    from arapp.pipeline import Pipeline
-    from tracking.session import load_session
+    from arapp.engine.pipeline import Pipeline
+    from tracking.recording.schema import load_session
 
     engines, settings = [], MemorySettings()
     session = Session(lambda spec, **o: engines.append(_Engine(spec, **o)) or engines[-1], settings)
@@ -328,10 +328,10 @@ def test_the_model_panel_offers_the_occlusion_modes(qtbot):
 def test_print_preview_toolpaths_are_occluded_too():
     """The pipeline hands the same occluder to the toolpath draw (the AR print preview): toolpaths behind a
     nearer surface are not drawn, in front of a farther one they are."""
-    from arapp.pipeline import Pipeline
+    from arapp.engine.pipeline import Pipeline
     from arapp.render.modes import LineSet
     from tracking.camera import Camera
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
 
     cam = Camera(np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]]), None, 320, 240)
     anchors = parse_anchors([{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0, "length": 0.05}])

@@ -3,8 +3,8 @@
 import cv2
 import numpy as np
 
-from arapp.placement import placement_from_any, world_from_placement
-from tracking.session import parse_anchor
+from arapp.geometry.placement import world_from_placement
+from tracking.recording.schema import parse_anchor
 
 
 def test_board_placement_frame_is_board_centre_with_normal_out_of_paper():
@@ -28,10 +28,10 @@ def test_single_marker_placement_is_the_anchor_frame():
 
 
 def test_partial_placement_dict_keeps_the_rest():
-    from arapp.geometry.model import Placement
+    from arapp.geometry.placement import Placement
 
     base = Placement(40.0, (1.0, 2.0, 0.0), (90.0, 0.0, 0.0))
-    p = placement_from_any({"size_mm": 60, "rotation_deg": 30}, base)
+    p = Placement.from_any({"size_mm": 60, "rotation_deg": 30}, base)
     assert p.size_mm == 60 and p.offset == (1.0, 2.0, 0.0) and p.rotation_deg == (0.0, 0.0, 30.0)
 
 
@@ -43,7 +43,7 @@ def _cv_pixel(camera, world_from_camera, X):
 
 
 def test_paper_point_under_a_pixel_inverts_opencv_projection():
-    from arapp.placement import placement_point_at_pixel
+    from arapp.geometry.placement import placement_point_at_pixel
     from tracking.anchors.render import look_at
     from tracking.camera import Camera
 
@@ -70,8 +70,8 @@ def test_paper_point_under_a_pixel_inverts_opencv_projection():
 
 
 def test_dragging_moves_in_the_plane_and_turns_about_the_model():
-    from arapp.geometry.model import Placement
-    from arapp.placement import dragged_placement
+    from arapp.geometry.placement import Placement
+    from arapp.geometry.placement import dragged_placement
 
     start = Placement(40.0, (10.0, 5.0, 2.0), (90.0, 0.0, 170.0))
     moved = dragged_placement(start, (12.0, 7.0), (32.0, -3.0))

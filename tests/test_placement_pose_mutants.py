@@ -1,4 +1,4 @@
-"""Rules of arapp/placement.py and tracking/anchors/pose.py that mutation testing found unpinned.
+"""Rules of arapp/geometry/placement.py and tracking/anchors/pose.py that mutation testing found unpinned.
 
 Oracles: matrices built by hand from the placement rules written here (largest extent -> size_mm,
 centred over the anchor, standing on z = 0, offset last), OpenCV's cv2.projectPoints and
@@ -9,16 +9,15 @@ import cv2
 import numpy as np
 import pytest
 
-from arapp.geometry.model import Model, Placement
-from arapp.placement import (dragged_placement, placement_from_model, placement_point_at_pixel,
-                             world_from_model)
+from arapp.geometry.model import Model
+from arapp.geometry.placement import Placement, dragged_placement, placement_point_at_pixel, world_from_model
 from tracking.anchors.detect import Observation
 from tracking.anchors.model import square_corners
 from tracking.anchors.pose import _robust_cost, planar_solutions, residuals, solve_pose
 from tracking.anchors.render import look_at
 from tracking.camera import Camera
 from tracking.poses import invert, rotation_angle
-from tracking.session import parse_anchor
+from tracking.recording.schema import parse_anchor
 
 CAM = Camera([[700.0, 0, 319.5], [0, 700.0, 239.5], [0, 0, 1]], [0.06, -0.04, 0.001, -0.0005, 0.0], 640, 480)
 
@@ -38,18 +37,18 @@ def hand_placement_mm():
     return m
 
 
-def test_placement_from_model_by_hand():
+def test_placement_matrix_by_hand():
     mm = hand_placement_mm()
-    assert np.allclose(placement_from_model(BOUNDS, PLACE), mm)        # default unit: millimetres
-    assert np.allclose(placement_from_model(BOUNDS, PLACE, "mm"), mm)
+    assert np.allclose(PLACE.matrix(BOUNDS), mm)        # default unit: millimetres
+    assert np.allclose(PLACE.matrix(BOUNDS, "mm"), mm)
     m = mm.copy()
     m[:3] *= 1e-3
-    assert np.allclose(placement_from_model(BOUNDS, PLACE, "m"), m)
+    assert np.allclose(PLACE.matrix(BOUNDS, "m"), m)
     # a dict placement is read as Placement.from_any does; the far corner lands where worked out above
-    got = placement_from_model(BOUNDS.tolist(), {"size_mm": 40, "offset": [5, -3, 1], "rotation_deg": 90})
+    got = Placement.from_any({"size_mm": 40, "offset": [5, -3, 1], "rotation_deg": 90}).matrix(BOUNDS.tolist())
     assert np.allclose(got @ [2.0, 1.0, 0.5, 1.0], [-5.0, 17.0, 11.0, 1.0])
     # None is the default placement: 50 mm, no offset, no turn -> 25 mm per unit, centred, on z = 0
-    got = placement_from_model(BOUNDS, None)
+    got = Placement.from_any(None).matrix(BOUNDS)
     assert np.allclose(got @ [2.0, 1.0, 0.5, 1.0], [25.0, 12.5, 12.5, 1.0])
     assert np.allclose(got @ [0.0, 0.0, 0.0, 1.0], [-25.0, -12.5, 0.0, 1.0])
 

@@ -8,9 +8,9 @@ import trimesh
 from arapp.printing import SliceSettings, load_profile, slice_mesh
 from arapp.printing.bed_anchor import save_bed_anchor, bed_from_anchor_measured
 from arapp.printing.gcode import parse_gcode
-from arapp.toolpath_overlay import KIND_COLOURS, OUT_OF_BED_COLOUR, out_of_bed, toolpath_line_sets, toolpath_overlay
+from arapp.engine.toolpath_overlay import (KIND_COLOURS, OUT_OF_BED_COLOUR, out_of_bed, toolpath_line_sets, toolpath_overlay)
 from tracking.poses import invert, read_tum
-from tracking.session import load_session
+from tracking.recording.schema import load_session
 
 RECORDING = "recordings/printer_bed"
 

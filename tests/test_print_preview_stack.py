@@ -10,9 +10,9 @@ import trimesh
 from arapp.printing import SliceSettings, load_profile, slice_mesh
 from arapp.printing.bed_anchor import bed_from_anchor_measured, save_bed_anchor
 from arapp.printing.gcode import parse_gcode
-from arapp.toolpath_overlay import CURRENT_COLOUR, DIM_ALPHA, toolpath_line_sets, world_from_bed
+from arapp.engine.toolpath_overlay import CURRENT_COLOUR, DIM_ALPHA, toolpath_line_sets, world_from_bed
 from tracking.poses import invert, read_tum
-from tracking.session import load_session
+from tracking.recording.schema import load_session
 
 RECORDING = "recordings/printer_bed"
 

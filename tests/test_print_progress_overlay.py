@@ -10,7 +10,7 @@ from arapp.printing import SliceSettings, slice_mesh
 from arapp.printing.gcode import parse_gcode
 from arapp.printing.link.job import Program
 from arapp.printing.link.serial_link import SerialPrinter
-from arapp.toolpath_overlay import CURRENT_COLOUR, PrintProgressOverlay
+from arapp.engine.toolpath_overlay import CURRENT_COLOUR, PrintProgressOverlay
 
 from virtual_printer import VirtualPrinterPty
 

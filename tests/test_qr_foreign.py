@@ -14,7 +14,7 @@ from tracking.anchors import AnchorTracker
 from tracking.anchors.render import look_at
 from tracking.camera import Camera
 from tracking.poses import invert, rotation_angle
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 L = 0.05  # symbol side (quiet zone excluded), metres
 PX = 12  # pixels per module in the flat drawing

@@ -12,7 +12,7 @@ from tracking.anchors import AnchorTracker
 from tracking.anchors.render import look_at, render_view
 from tracking.camera import Camera
 from tracking.errors import SessionError
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 import cv2
 

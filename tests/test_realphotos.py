@@ -18,7 +18,7 @@ import pytest
 from realphotos_data import (ALL_PHOTOS, ARUCO_PHOTOS, DATA, QR_PHOTOS, aruco_match, board_pose_check,
                              opencv_board_positions, photo_camera, qr_anchor_check, tutorial_camera)
 from tracking.anchors import AnchorTracker
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 REPO = Path(__file__).resolve().parents[1]
 

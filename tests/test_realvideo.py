@@ -21,7 +21,7 @@ from tracking.anchors import AnchorTracker
 from tracking.camera import Camera
 from tracking.evaluation_real import (GOAL_TRACKED, GOAL_WORST_WIDTH, OpenCVReference, check_pose, check_run,
                                       measure, summarise)
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 
 @pytest.mark.parametrize("slam", [False, True], ids=["no_slam", "slam"])

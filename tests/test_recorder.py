@@ -12,8 +12,8 @@ import pytest
 
 from arapp.cli import main
 from tracking.errors import SessionError, SourceError
-from tracking.recorder import RecordingWriter, record
-from tracking.session import load_session
+from tracking.recording.writer import RecordingWriter, record
+from tracking.recording.schema import load_session
 from tracking.sources import RecordingSource, open_source
 
 from test_sources import (CAM, NO_DEPTH_FRAME, TIMES, depth_of, depth_rule, frame_image,  # noqa: E402 - shared

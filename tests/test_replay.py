@@ -49,9 +49,9 @@ def test_outputs_follow_the_contract(replayed, repo_root):
 
 def test_overlay_video_shows_the_model_where_it_projects(replayed, repo_root):
     from arapp.geometry import load_model
-    from arapp.placement import world_from_model
+    from arapp.geometry.placement import world_from_model
     from tracking.poses import invert
-    from tracking.session import load_session
+    from tracking.recording.schema import load_session
 
     session = load_session(repo_root / RECORDING)
     model = load_model(repo_root / "models" / "vase.json")
@@ -83,7 +83,7 @@ def test_overlay_video_shows_the_model_where_it_projects(replayed, repo_root):
 
 
 def test_cancelled_replay_leaves_consistent_outputs(tmp_path, repo_root):
-    from arapp.replay import ReplayOptions, replay
+    from arapp.engine.replay import ReplayOptions, replay
 
     cancel = threading.Event()
 

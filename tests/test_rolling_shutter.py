@@ -15,7 +15,7 @@ from tracking.anchors.detect import Observation
 from tracking.anchors.model import build_models
 from tracking.camera import Camera
 from tracking.errors import CalibrationError
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 from scenes import rolling_shutter_pixels
 
 K = np.array([[530.0, 0, 319.5], [0, 530.0, 239.5], [0, 0, 1]])

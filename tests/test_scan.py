@@ -165,7 +165,7 @@ def test_nurbs_fit_falls_back_to_a_bicubic_patch_for_a_box(tmp_path):
     from arapp.geometry import load_model
     from arapp.scan.nurbs_fit import fit_model, fit_revolution, write_model
     from scan_scene import BOARD
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
 
     anchors = parse_anchors([dict(BOARD)])
     box = trimesh.creation.box((0.04, 0.03, 0.05))

@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from arapp.app.live import SourceInfo
+from arapp.engine.live import SourceInfo
 from arapp.app.runner import ImmediateRunner
 from arapp.app.scan_session import ScanSession, ScanSettings, registered_placement
 from arapp.app.session import Session
-from arapp.placement import placement_from_model, world_from_placement
+from arapp.geometry.placement import world_from_placement
 from scan_scene import BOARD, default_K
 from tracking.camera import Camera
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 W, H = 640, 480
 CENTRE = np.array([0.092, 0.092, 0.0])   # 6 x 6 markers of 24 mm, 8 mm apart: 184 mm square
@@ -130,7 +130,7 @@ def test_registered_placement_leaves_the_mesh_where_it_is():
     bounds = np.array([[-12.0, 30.5, 0.4], [40.0, 55.0, 61.0]])
     for lo_shift in (0.0, 7.0):
         b = bounds + lo_shift
-        M = placement_from_model(b, registered_placement(b))
+        M = registered_placement(b).matrix(b)
         assert M == pytest.approx(np.eye(4), abs=1e-9)
 
 

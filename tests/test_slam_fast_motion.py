@@ -283,7 +283,7 @@ def test_a_seam_is_faded_only_where_the_view_moves_slowly(turn, flow_px, faded):
     flow) the new pose is shown at once, as a fade would keep the old source's error for frames that the
     motion hides anyway (`fast_blend_frames`). Rule written here: the output is the new pose, or the
     predicted one."""
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
 
     anchors = parse_anchors([{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0, "length": 0.05}])
     with Tracker(PLAIN, anchors, threaded=False) as tr:
@@ -344,7 +344,7 @@ def test_a_hand_over_to_the_better_flow_fades_from_the_anchors_pose():
     speeding up outruns that), and as onto precise anchors: over `precise_blend_frames`, this frame taking
     the first step. Rule written here: on a slowly turning camera, the output is the flow's pose moved
     (1 - 1/precise_blend_frames) of the way toward the anchors' (offsets along the camera's x axis)."""
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
 
     anchors = parse_anchors([{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 0, "length": 0.05}])
     with Tracker(PLAIN, anchors, threaded=False) as tr:

@@ -19,7 +19,7 @@ import pytest
 
 from test_slam_start import _look
 from tracking.camera import Camera
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 from tracking.fusion import Tracker
 from tracking.fusion.handover import FLOW_DRIFT_M
 from tracking.fusion.state import AnchorMemory

@@ -76,7 +76,7 @@ def test_a_board_whose_first_pose_is_likely_centimetres_off_does_not_start_it(ma
     from types import SimpleNamespace
 
     from tracking.camera import Camera
-    from tracking.session import parse_anchors
+    from tracking.recording.schema import parse_anchors
     from tracking.fusion.handover import START_SPREAD
 
     K = np.array([[530.0, 0, 319.5], [0, 530.0, 239.5], [0, 0, 1]])

@@ -13,7 +13,7 @@ import pytest
 
 from tracking.camera import Camera
 from tracking.errors import CalibrationError, SessionError, SourceError
-from tracking.recorder import RecordingWriter
+from tracking.recording.writer import RecordingWriter
 from tracking.sources import (Frame, RecordingSource, SourceWarning, V4L2Source, VideoFileSource, open_source,
                               read_frames_csv)
 

@@ -252,7 +252,7 @@ def test_cli_synth_writes_a_valid_recording_and_refuses_overwrite(tmp_path, caps
 
     from arapp.cli import main
     from tracking.poses import read_tum
-    from tracking.session import load_session
+    from tracking.recording.schema import load_session
 
     scene = {"name": "tiny", "anchors": [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 1, "length": 0.05}],
              "trajectory": {"kind": "orbit", "distance": 0.3}, "camera": {"width": 160, "height": 120},

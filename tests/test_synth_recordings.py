@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tracking.poses import read_tum, transform_points
-from tracking.session import load_session
+from tracking.recording.schema import load_session
 from tracking.sources import RecordingSource
 from tracking.synth import scene_from_arg
 from tracking.synth.patterns import anchor_corners

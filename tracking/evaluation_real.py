@@ -25,7 +25,7 @@ import numpy as np
 from tracking.anchors.dictionaries import aruco_dictionary
 from tracking.camera import Camera
 from tracking.poses import invert, to_rvec_tvec
-from tracking.session import AnchorSpec
+from tracking.anchors.kinds import AnchorSpec
 
 # the Done-when goals of issue 25 (BENCHMARKS.md's real-video table applies them)
 GOAL_TRACKED = 0.90          # tracked fraction of the frames where plain OpenCV sees the anchor

@@ -18,7 +18,7 @@ from PIL import Image
 
 from tracking.anchors.model import build_models
 from tracking.anchors.render import draw_anchor, plane_layout
-from tracking.session import AnchorSpec
+from tracking.anchors.kinds import AnchorSpec
 
 PAGES_MM = {"A4": (210.0, 297.0), "A3": (297.0, 420.0), "Letter": (215.9, 279.4), "A5": (148.0, 210.0)}
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from typing import Callable
 
-from arapp.app.sourcespec import is_live_spec
+from arapp.engine.sourcespec import is_live_spec
 
 # From opening to the first picture: the process engine's cold start measured 2-2.5 s on a loaded 2-core
 # machine (a camera adds its own opening, an OAK device boots in a few seconds), so a source still silent

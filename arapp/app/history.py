@@ -14,14 +14,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from arapp.app.events import Events
+from arapp.engine.events import Events
 
 MAX_STEPS = 200  # snapshots are small (a dict of edits and a placement); past this the oldest go
 
 
 @dataclass(frozen=True)
 class Snapshot:
-    """What undo restores: the control-point edits and the placement (arapp.placement.Placement)."""
+    """What undo restores: the control-point edits and the placement (arapp.geometry.placement.Placement)."""
 
     edits: tuple  # sorted ((surface, i, j), ((x, y, z), weight)) pairs
     placement: object

@@ -84,5 +84,5 @@ def export_model(model, placement, path, thickness_mm: float = 2.0) -> Path:
         text = json.dumps(model_to_dict(model, placement), indent=1)
         return write_atomic(p, text.encode("utf-8"))
     placed = placed_model(model, placement)
-    solid = placed_solid(placed, placed.placement_matrix("mm"), thickness_mm=thickness_mm, center=False)
+    solid = placed_solid(placed, thickness_mm=thickness_mm, center=False)
     return write_mesh(solid, p)

@@ -25,13 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
-from arapp.app.events import Events
-from arapp.app.printers import resolve_profile
+from arapp.engine.events import Events
+from arapp.printing.printers import resolve_profile
 from arapp.app.printlink import PrintEvent, start_job
 from arapp.app.runner import ImmediateRunner
 from arapp.app.saved_job import SavedJob, find_saved_job, load_saved_job, stop_text
-from arapp.app.toolpaths import bed_from_placement_mm, preview_spec, summarize
-from arapp.placement import Placement, placement_from_any
+from arapp.engine.toolpaths import bed_from_placement_mm, preview_spec, summarize
+from arapp.geometry.placement import Placement
 from arapp.printing import SliceCancelled, placed_solid, slice_mesh
 from arapp.printing.export import drop_on_bed
 from arapp.printing.gcode import parse_gcode
@@ -60,12 +60,13 @@ def default_work_dir() -> Path:
     return Path.home() / ".arapp" / "print-jobs"
 
 
-def slice_job(model, matrix, settings, profile, profile_name: str, job_gcode: Path, progress, cancel,
-              slicer: str = "built-in"):
+def slice_job(model, placement: Placement, settings, profile, profile_name: str, job_gcode: Path, progress,
+              cancel, slicer: str = "built-in"):
     """Worker thread: the placed solid sliced by `slicer` (a SLICERS name); the G-code written to
     `job_gcode` (the copy the preview and the printer job read) with its summary. Returns (result, gcode
     path, summary, profile, name, bed_from_placement: the 4x4 (mm) the slicer moved the placed part by)."""
-    here = placed_solid(model, matrix, profile=profile, center=False)  # x, y as placed; lowest point at z = 0
+    matrix = placement.matrix(model.bounds(), "mm")
+    here = placed_solid(model, placement, profile=profile, center=False)  # x, y as placed; lowest point at z = 0
     solid = drop_on_bed(here, profile)  # centred on the bed, as placed_solid does by default
     result = SLICERS[slicer](solid, settings, profile, progress=progress, cancel=cancel)
     v = np.asarray(model.mesh().vertices, float) @ np.asarray(matrix, float)[:3, :3].T + np.asarray(matrix, float)[:3, 3]
@@ -83,7 +84,7 @@ class PrintSession:
 
     def __init__(self, model, placement: Placement | None, runner=None, work_dir=None):
         self.model = model
-        self.placement = placement_from_any(placement, getattr(model, "placement", None))
+        self.placement = Placement.from_any(placement, getattr(model, "placement", None))
         self.run = runner or ImmediateRunner()
         self.work_dir = Path(work_dir) if work_dir is not None else default_work_dir()
         self.events = Events("solid_ready", "slice_progress", "sliced", "slice_failed", "preview_changed",
@@ -92,7 +93,7 @@ class PrintSession:
         self.result = None  # arapp.printing SliceResult
         self.gcode_path: str | None = None  # where the user saved the G-code
         self.job_gcode_path: str | None = None
-        self.summary = None  # arapp.app.toolpaths.PreviewSummary of the sliced G-code
+        self.summary = None  # arapp.engine.toolpaths.PreviewSummary of the sliced G-code
         self.profile = None  # the PrinterProfile sliced for
         self.sliced_profile: str | None = None  # its name or path
         self.bed_from_placement = None  # 4x4 (mm): the slicer's move of the placed part onto the bed
@@ -111,13 +112,9 @@ class PrintSession:
         self.events.error.emit(title, str(exc) or type(exc).__name__)
 
     # -- the printable solid -------------------------------------------------------------
-    def model_to_placement_mm(self):
-        """4x4 from model units to the anchor's placement frame in millimetres, exactly as displayed."""
-        self.model.placement = self.placement
-        return self.model.placement_matrix("mm")
-
     def make_solid(self) -> None:
-        self.run.run(placed_solid, self.model, self.model_to_placement_mm(), done=self._solid_done,
+        self.model.placement = self.placement
+        self.run.run(placed_solid, self.model, self.placement, done=self._solid_done,
                      failed=lambda e: self.fail("Cannot make a printable solid", e), name="arapp-solid")
 
     def _solid_done(self, solid) -> None:
@@ -152,7 +149,8 @@ class PrintSession:
                 last[0] = now
                 self.run.post(self.events.slice_progress.emit, f)
 
-        self._slice_task = self.run.run(slice_job, self.model, self.model_to_placement_mm(), settings, profile,
+        self.model.placement = self.placement
+        self._slice_task = self.run.run(slice_job, self.model, self.placement, settings, profile,
                                         str(profile_name), job_gcode, progress, cancel, slicer,
                                         done=self._slice_done,
                                         failed=self._slice_failed, name="arapp-slice")
@@ -219,7 +217,7 @@ class PrintSession:
         self.events.preview_changed.emit(spec)
 
     def preview_shown(self, info: dict) -> None:
-        """The live view drew the preview `info` (arapp.app.toolpaths); the session tells us."""
+        """The live view drew the preview `info` (arapp.engine.toolpaths); the session tells us."""
         self.events.preview_drawn.emit(info)
 
     # -- printing --------------------------------------------------------------------------

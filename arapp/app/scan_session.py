@@ -41,8 +41,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from arapp.app.events import Events
-from arapp.placement import Placement, world_from_placement
+from arapp.engine.editing import model_mesh
+from arapp.engine.events import Events
+from arapp.engine.pipeline import load_display_model
+from arapp.geometry.placement import Placement, world_from_placement
+from tracking.sources.base import Frame
 
 # (elevation from, to (degrees), azimuth cells): 12 + 12 + 9 + 6 + 1 = 40 cells of roughly equal solid angle
 RINGS = ((0.0, 20.0, 12), (20.0, 40.0, 12), (40.0, 60.0, 9), (60.0, 80.0, 6), (80.0, 90.0, 1))
@@ -165,8 +168,6 @@ class CapturedFrames:
     error = None
 
     def __init__(self, views: list[CapturedView], camera):
-        from tracking.sources.base import Frame
-
         self.camera = camera
         self._frames = [Frame(v.index, v.t, v.image) for v in sorted(views, key=lambda v: (v.t, v.index))]
         self.frame_count = len(self._frames)
@@ -223,7 +224,7 @@ class ScanSession:
     # -- geometry ------------------------------------------------------------------------
     def set_board(self, camera, anchors) -> None:
         """The camera (tracking.camera.Camera) and anchors (AnchorSpec list) of the source being scanned."""
-        from arapp.scan.fusion import board_frame
+        from arapp.scan.fusion import board_frame  # arapp.scan (scipy.ndimage, trimesh): loaded when scanning
 
         self.camera, self.anchors = camera, list(anchors)
         self.frame = board_frame(self.anchors)
@@ -408,9 +409,7 @@ class ScanSession:
 
     def _reconstruct_job(self, views, camera, anchors, progress, cancel):
         """Worker thread: pipeline -> mesh in the placement frame (mm) -> PLY file -> loaded model."""
-        from arapp.app.editing import model_mesh
-        from arapp.pipeline import load_display_model
-        from arapp.scan.pipeline import ScanOptions, scan, write_mesh
+        from arapp.scan.pipeline import ScanOptions, scan, write_mesh  # the scan engines: only to reconstruct
 
         st = self.settings
         t0 = time.perf_counter()
@@ -436,7 +435,7 @@ class ScanSession:
         self.events.changed.emit()
 
     def _failed(self, cancel, exc) -> None:
-        from arapp.scan.views import ScanCancelled
+        from arapp.scan.views import ScanCancelled  # arapp.scan.views loads the tracker: only after a scan ran
 
         if cancel is not self._cancel:
             return

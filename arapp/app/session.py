@@ -3,12 +3,12 @@ print job and tracking state, with change events. No Qt.
 
 The Qt layer (arapp.gui) binds widgets to a `Session`: it calls its methods
 when the user acts and updates widgets from its `events`. A headless driver
-(arapp.app.headless, tests) does the same without widgets. The session talks
-to the live engine only through `arapp.app.commands`; an engine factory makes
+(arapp.engine.headless, tests) does the same without widgets. The session talks
+to the live engine only through `arapp.engine.commands`; an engine factory makes
 the engine (the GUI's thread or process engine, or a headless one) and wires
 its events to `EngineHandlers`, which must be called on the session's thread.
 
-Units: placement in millimetres and degrees (arapp.placement), poses 4x4
+Units: placement in millimetres and degrees (arapp.geometry.placement), poses 4x4
 world_from_camera in metres (docs/domain.md).
 """
 
@@ -21,24 +21,25 @@ from typing import Any, Callable
 
 import numpy as np
 
-from arapp.app import commands as cmd
-from arapp.app import recording
+from arapp.engine import commands as cmd
+from arapp.engine import recording
 from arapp.app import source_anchors
-from arapp.app.editing import display_placement, edited_model, model_mesh
-from arapp.app.events import Events
-from arapp.app.capture import VIDEO_CODECS, new_capture_path, save_screenshot
+from arapp.engine.editing import display_placement, edited_model, model_mesh
+from arapp.engine.events import Events
+from arapp.engine.capture import VIDEO_CODECS, new_capture_path, save_screenshot
 from arapp.app.first_picture import FirstPictureWatch, no_picture_message
 from arapp.app.history import History
 from arapp.app.model_export import export_model
 from arapp.app.print_session import PrintSession
 from arapp.app.runner import ImmediateRunner
-from arapp.app.sourcespec import display_name
+from arapp.engine.sourcespec import DEFAULT_ANCHORS, display_name
 from arapp.exchange.meshes import is_mesh_path
-from arapp.pipeline import MODES, OCCLUSION_MODES, load_display_model
-from arapp.placement import Placement, dragged_placement, placement_point_at_pixel
+from arapp.engine.pipeline import MODES, OCCLUSION_MODES, load_display_model
+from arapp.geometry.placement import Placement, dragged_placement, placement_point_at_pixel
+from arapp.app.scene_keeper import SceneKeeper
 from tracking.anchors.defaults import DEFAULT_DICTIONARY
 from tracking.anchors.discover import Suggestion
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 RECENT_MAX = 8
 # while the print preview stands on the bed, the model on its marker is drawn see-through: one solid part
@@ -46,9 +47,6 @@ RECENT_MAX = 8
 GHOST_MODE = "translucent"
 OCCLUSION_CHOICES = ("auto", *OCCLUSION_MODES)  # auto: depth when the frames carry depth, else off
 GHOST_NOTE = "Print preview on the bed: the model on the marker is drawn see-through meanwhile"
-# what `arapp markers board` prints by default, so a first sheet is found without editing anchors
-DEFAULT_ANCHORS = [{"kind": "aruco_board", "dictionary": DEFAULT_DICTIONARY, "markers_x": 4, "markers_y": 3,
-                    "marker_length": 0.04, "separation": 0.01, "first_id": 0}]
 
 
 class MemorySettings:
@@ -107,7 +105,7 @@ class Session:
     model_loaded(model, path, placement), model_edited(model),
     placement_changed(Placement), mode_changed(mode), playing_changed(bool),
     toolpaths_shown(info), recent_changed(), print_session(PrintSession),
-    anchor_offer(dict): anchor discovery found something (arapp.app.discovery.offer_dict; `use_offer` or
+    anchor_offer(dict): anchor discovery found something (arapp.engine.discovery.offer_dict; `use_offer` or
     `dismiss_offer` answer it).
     """
 
@@ -123,7 +121,7 @@ class Session:
         self.old_engines: list = []
         self.source_spec: str | None = None
         self.source_info = None
-        self.last_shown = None  # the newest processed frame (arapp.app.processor.Shown): tracking state
+        self.last_shown = None  # the newest processed frame (arapp.engine.processor.Shown): tracking state
         self.errors: list[tuple[str, str]] = []
         self.base_model = None  # the model as loaded; `model` is it with `edits` applied
         self.model = None
@@ -140,18 +138,20 @@ class Session:
         self.display_size: tuple[int, int] | None = None
         self.model_gen = 0
         self.highlight: tuple[int, int, int] | None = None  # the control point being edited, ringed
-        self.toolpaths_spec: dict | None = None  # the print preview asked for (arapp.app.toolpaths.preview_spec)
+        self.show_marks = False  # the detected markers outlined on the frames (`set_show_marks`)
+        self.toolpaths_spec: dict | None = None  # the print preview asked for (arapp.engine.toolpaths.preview_spec)
         self.toolpaths_gen = 0
         self.toolpaths_info: dict | None = None  # what the engine drew
         self._unghost_gen: int | None = None  # the preview clear after which the model is drawn solid again
         self.recording_folder = None
-        self.ar_video_path: Path | None = None  # the AR video being recorded (arapp.app.capture)
+        self.ar_video_path: Path | None = None  # the AR video being recorded (arapp.engine.capture)
         self.print_session: PrintSession | None = None
         self._drag = None  # (mode, grabbed paper point mm, placement at the grab, pose at the grab)
         self._edit = self.run.latest(retessellate, self._edit_done, self._edit_failed, name="arapp-edit")
         self.history = History(self)  # undo / redo of control-point edits and placement
         self.first_picture = FirstPictureWatch()  # a source silent for its timeout_s is given up (`tick`)
         self.anchor_offer: dict | None = None  # what anchor discovery found in the open source, unanswered
+        self.scenes = SceneKeeper(self)  # the saved scene tracked against (arapp.app.scene_keeper)
 
     # -- errors and messages -------------------------------------------------------------
     def report(self, title: str, message: str) -> None:
@@ -230,8 +230,11 @@ class Session:
             engine.send(cmd.SetOcclusion(self.occlusion))
         if self.highlight is not None:
             engine.send(cmd.Highlight(self.highlight))
+        if self.show_marks:
+            engine.send(cmd.ShowMarks(True))
         if self.toolpaths_spec is not None:
             engine.send(cmd.ShowToolpaths(self.toolpaths_spec, self.toolpaths_gen))
+        self.scenes.engine_started()
         self.events.playing_changed.emit(True)
 
     @staticmethod
@@ -266,6 +269,12 @@ class Session:
             self.engine.stop(wait=wait)
         for e in self.old_engines:
             e.stop(wait=wait / 2)
+
+    def set_show_marks(self, on: bool) -> None:
+        """Outline the markers the tracker detects, with the anchors' axes, on the frames shown (drawn by the
+        engine under the model: arapp.engine.overlay_marks), or not."""
+        self.show_marks = bool(on)
+        self.send(cmd.ShowMarks(self.show_marks))
 
     def set_display_size(self, width: int, height: int) -> None:
         self.display_size = (int(width), int(height))
@@ -555,7 +564,7 @@ class Session:
     def set_placement(self, placement: Placement) -> None:
         """Place the model: size (mm), offset (mm) and rotation (degrees) on the world anchor."""
         if not isinstance(placement, Placement):
-            raise TypeError(f"a placement must be an arapp.placement.Placement, got {type(placement).__name__}")
+            raise TypeError(f"a placement must be an arapp.geometry.placement.Placement, got {type(placement).__name__}")
         self.placement = placement
         if self.model is not None:
             self.send(cmd.SetPlacement(placement))
@@ -604,7 +613,7 @@ class Session:
 
     # -- print preview and printing ----------------------------------------------------------
     def set_toolpaths(self, spec: dict | None) -> None:
-        """Show the print preview `spec` (arapp.app.toolpaths.preview_spec) on the bed; None clears it."""
+        """Show the print preview `spec` (arapp.engine.toolpaths.preview_spec) on the bed; None clears it."""
         self.toolpaths_gen += 1
         ghost_before = self.toolpaths_spec is not None
         self.toolpaths_spec = None if spec is None else dict(spec)

@@ -6,7 +6,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from tracking.printables import write_sheet
-from tracking.session import AnchorSpec, parse_anchors
+from tracking.anchors.kinds import AnchorSpec
+from tracking.recording.schema import parse_anchors
 
 
 def sheet_name(index: int, spec) -> str:

@@ -1,6 +1,6 @@
 """Anchors remembered per source: the ones the user accepted from anchor discovery for that video or camera.
 
-Kept in the per-user config (arapp.user_config, state.json key `source_anchors`: {source key: [anchor JSON
+Kept in the per-user config (arapp.store.user_config, state.json key `source_anchors`: {source key: [anchor JSON
 blocks]}), keyed by `source_key`: a file's absolute path (so `clip.mp4`, `file:clip.mp4` and
 `file:/abs/clip.mp4?calibration=cam.yaml` are one source), else the scheme and device (`v4l2:0`). The
 session opens a source with its remembered anchors when it has some, else with the anchors setting.
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from arapp import user_config
+from arapp.store import user_config
 from tracking.errors import SourceError
 from tracking.sources import parse_spec
 

@@ -57,7 +57,7 @@ def run(args) -> int:
 
     check_args(args)
     if args.anchors:
-        from tracking.session import parse_anchors, read_anchor_blocks
+        from tracking.recording.schema import parse_anchors, read_anchor_blocks
 
         specs = parse_anchors(read_anchor_blocks(args.anchors), where=f"{args.anchors}: anchors")
         board = BoardSpec.from_anchor(specs[0], f"{args.anchors}: anchors[0]")

@@ -16,7 +16,7 @@ def add_arguments(parser):
 
 
 def run(args):
-    from arapp.replay import ReplayOptions, replay, terminal_progress
+    from arapp.engine.replay import ReplayOptions, replay, terminal_progress
 
     print(f"demo: replaying {args.recording} with {args.model}")
     report = replay(args.recording, args.out, ReplayOptions(model=args.model), progress=terminal_progress())

@@ -16,6 +16,8 @@ def add_arguments(parser):
                         "printer bed (the source's first anchor is the bed anchor)")
     parser.add_argument("--printer", metavar="PROFILE", help="printer profile placing the bed (with --toolpaths)")
     parser.add_argument("--layer", type=int, help="with --toolpaths: show layers up to N (0-based), N highlighted")
+    parser.add_argument("--scene", metavar="S.arscene", help="saved scene to track against: relocalises on its map, "
+                        "shows its model where it was left (File > Save scene writes one; docs/scene-format.md)")
 
 
 def run(args):
@@ -42,7 +44,7 @@ def run(args):
             raise ValueError(f"two calibrations: {spec.calibration} in --source and --calibration {calibration}; give one")
         source = format_spec(spec.scheme, spec.target, calibration)
     if getattr(args, "anchors", None):
-        from tracking.session import parse_anchors, read_anchor_blocks
+        from tracking.recording.schema import parse_anchors, read_anchor_blocks
 
         anchors = read_anchor_blocks(args.anchors)
         parse_anchors(anchors, where=f"{args.anchors}: anchors")  # refused here, in one line
@@ -55,8 +57,13 @@ def run(args):
 
         if not Path(toolpaths).is_file():
             raise ValueError(f"--toolpaths {toolpaths}: no such file; slice a model first (arapp slice MODEL -o FILE)")
-        from arapp.app.toolpaths import ToolpathBuilder
+        from arapp.engine.toolpaths import ToolpathBuilder
 
         ToolpathBuilder().profile(printer)  # a missing profile or bed anchor: say so now, not in a dialog
+    scene = getattr(args, "scene", None)
+    if scene:
+        from arapp.exchange.scene import read_scene_models
+
+        read_scene_models(scene)   # a missing, corrupt or newer file: one line now, not a dialog
     return run_gui(source=source, model=getattr(args, "model", None), frames=frames, screenshot=screenshot,
-                   toolpaths=toolpaths, printer=printer, layer=layer, anchors=anchors)
+                   toolpaths=toolpaths, printer=printer, layer=layer, anchors=anchors, scene=scene)

@@ -56,7 +56,7 @@ def run(args) -> int:
     import json
 
     from tracking.printables import write_sheet
-    from tracking.session import parse_anchor
+    from tracking.recording.schema import parse_anchor
 
     kind = _printable_kinds()[args.kind]
     block = kind.cli_block(args)

@@ -26,10 +26,10 @@ def add_arguments(parser):
 def run(args):
     from pathlib import Path
 
-    from tracking.recorder import record
+    from tracking.recording.writer import record
 
     from arapp.exchange.staging import staged_folder
-    from arapp.input_source import describe_anchors, open_input
+    from arapp.engine.input_source import describe_anchors, open_input
 
     for flag, value in (("--seconds", args.seconds), ("--fps", args.fps)):
         if value is not None and not 0 < value <= 86400:
@@ -61,10 +61,10 @@ def run(args):
 
 
 def say_why_untracked(folder, default_anchors: bool) -> None:
-    """A recording in which its anchors give no pose says why, and what it shows instead (arapp/untracked.py)."""
-    from tracking.session import load_session
+    """A recording in which its anchors give no pose says why, and what it shows instead (arapp/engine/untracked.py)."""
+    from tracking.recording.schema import load_session
 
-    from arapp.untracked import untracked_lines  # discovery's detectors: only loaded after a recording
+    from arapp.engine.untracked import untracked_lines  # discovery's detectors: only loaded after a recording
 
     session = load_session(folder)
     for line in untracked_lines(session.video_path, session.anchors, default_anchors, camera=session.camera):

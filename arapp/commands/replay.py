@@ -31,6 +31,11 @@ def add_arguments(parser):
     parser.add_argument("--printer", help="printer profile JSON (for --toolpaths)")
     parser.add_argument("--toolpaths", help="G-code whose toolpaths are drawn on the printer bed")
     parser.add_argument("--layer", type=int, help="with --toolpaths: highlight this layer, dim those below")
+    parser.add_argument("--scene", metavar="S.arscene", help="start from this saved scene: relocalise against its "
+                        "map (the model shows where it was left, even with the marker removed) and show its model "
+                        "unless --model is given (docs/scene-format.md)")
+    parser.add_argument("--save-scene", metavar="S.arscene", help="save the scene at the end: the map (extended, "
+                        "when --scene was loaded), anchors, model and placement; may be the --scene file")
 
 
 def check_args(args) -> None:
@@ -45,10 +50,14 @@ def check_args(args) -> None:
 
 def run(args):
     from arapp.exchange.staging import staged_folder
-    from arapp.geometry.model import check_size_mm
-    from arapp.replay import ReplayOptions, replay, terminal_progress
+    from arapp.geometry.placement import check_size_mm
+    from arapp.engine.replay import ReplayOptions, replay, terminal_progress
 
     check_args(args)
+    if (args.scene or args.save_scene) and args.no_slam:
+        raise ValueError("--scene and --save-scene need the keypoint map: drop --no-slam")
+    if args.save_scene and not args.save_scene.endswith(".arscene"):
+        raise ValueError(f"--save-scene {args.save_scene}: scene files end in .arscene")
     if args.size is not None:
         check_size_mm(args.size, "--size")
     placement = None
@@ -58,7 +67,8 @@ def run(args):
                          slam=not args.no_slam, max_frames=args.frames, printer=args.printer,
                          toolpaths=args.toolpaths, layer=args.layer,
                          tracker_params={"marker_every": args.marker_every} if not args.no_slam else {},
-                         calibration=args.calibration, anchors=args.anchors, occlusion=args.occlusion)
+                         calibration=args.calibration, anchors=args.anchors, occlusion=args.occlusion,
+                         scene=args.scene, save_scene=args.save_scene)
     # Written to a temporary folder moved into place at the end: a failure leaves no (empty) --out behind.
     with staged_folder(args.out) as tmp:
         report = replay(args.recording, tmp, opts, progress=terminal_progress(sys.stderr),  # stderr as now
@@ -75,10 +85,10 @@ def run(args):
 
 
 def say_why_untracked(args, report) -> None:
-    """A replay that tracked nothing says why, and what the video shows instead (arapp/untracked.py)."""
+    """A replay that tracked nothing says why, and what the video shows instead (arapp/engine/untracked.py)."""
     if not report.get("frames") or report.get("tracked_fraction"):
         return
-    from arapp.untracked import untracked_lines_for  # discovery's detectors: only for a replay that needs them
+    from arapp.engine.untracked import untracked_lines_for  # discovery's detectors: only for a replay that needs them
 
     for line in untracked_lines_for(args.recording, args.calibration, args.anchors):
         print(f"replay: {line}")

@@ -98,7 +98,7 @@ def run(args) -> int:
     if args.seconds is not None and not 0 < args.seconds <= 86400:
         raise ValueError(f"--seconds must be above 0 (and at most 86400), got {args.seconds}")
     cancel = threading.Event()
-    from arapp.input_source import open_input
+    from arapp.engine.input_source import open_input
 
     opened = open_input(args.recording or args.source, calibration=args.calibration, anchors=args.anchors)
     if opened.source.live and args.seconds is None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -37,7 +38,7 @@ def load_for_printing(path: str, size_mm: float | None, thickness_mm: float, pro
     """The model at `path` as a watertight solid on the bed (mm): meshes through arapp.exchange (the one
     loader and units rule), JSON models through arapp.geometry. `size_mm` and `thickness_mm` are checked."""
     from arapp.exchange import is_mesh_path, load_mesh
-    from arapp.geometry.model import check_size_mm
+    from arapp.geometry.placement import check_size_mm
     from arapp.printing.export import placed_solid, scale_to_size
 
     if size_mm is not None:
@@ -52,7 +53,7 @@ def load_for_printing(path: str, size_mm: float | None, thickness_mm: float, pro
     from arapp.geometry import load_model
 
     model = load_model(p)
-    placement = {"size_mm": size_mm} if size_mm is not None else None
+    placement = dataclasses.replace(model.placement, size_mm=size_mm) if size_mm is not None else None
     return placed_solid(model, placement, thickness_mm=thickness_mm, profile=profile)
 
 

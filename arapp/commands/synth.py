@@ -18,15 +18,21 @@ def run(args):
 
     from arapp.exchange.staging import staged_folder
     from tracking.synth import scene_from_arg, synthesize
-    from tracking.synth.presets import EXTRA_TUNING, HELD, HELD_TEST, OCCLUSION, OCCLUSION_TEST, PRESETS, TEST
+    from tracking.synth.presets import (EXTRA_TUNING, HEADON, HEADON_TEST, HELD, HELD_TEST, OCCLUSION, OCCLUSION_TEST,
+                                        PRESETS, TEST)
 
     if args.list or not args.scene:
-        for name, p in {**PRESETS, **EXTRA_TUNING, **HELD, **OCCLUSION}.items():
+        for name, p in {**PRESETS, **EXTRA_TUNING, **HELD, **OCCLUSION, **HEADON}.items():
             cam = p["camera"]
-            kind = ("test  " if name in TEST or name in HELD_TEST or name in OCCLUSION_TEST
-                    else "extra " if name in EXTRA_TUNING or name in HELD or name in OCCLUSION else "tuning")
+            kind = ("test  " if name in TEST or name in HELD_TEST or name in OCCLUSION_TEST or name in HEADON_TEST
+                    else "extra " if name in EXTRA_TUNING or name in HELD or name in OCCLUSION or name in HEADON
+                    else "tuning")
             print(f"{name:18s} {kind} {cam['width']}x{cam['height']} "
                   f"{p['duration']:.1f} s  {', '.join(a['kind'] for a in p['anchors'])}  {p['trajectory']['kind']}")
+        from tracking.synth.revisits import SETS, VARIANTS
+
+        print(f"scene revisits (tracking.synth.revisits): SET_map, SET_revisit_N_VARIANT; sets {', '.join(SETS)} "
+              f"(tune_scene: tuning, test_scene: test); variants {', '.join(VARIANTS)}")
         return 0
     if not args.out:
         raise ValueError("--out is required: the recording folder to write (e.g. recordings/my_scene)")

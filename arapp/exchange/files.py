@@ -18,7 +18,7 @@ from typing import Callable
 
 from tracking.camera import Camera
 from tracking.errors import CalibrationError, SessionError
-from tracking.session import load_session
+from tracking.recording.schema import load_session
 from tracking.sources import read_frames_csv
 
 

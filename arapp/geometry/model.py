@@ -22,67 +22,15 @@ from arapp.exchange.meshes import EXPORT_SUFFIXES, MESH_SUFFIXES, MeshFileError,
 from . import construct
 from .curve import NurbsCurve
 from .errors import GeometryError, ModelError, fmt
+from .placement import MAX_SIZE_MM, Placement, check_size_mm  # noqa: F401 - MAX_SIZE_MM: part of this module's API
 from .solid import SolidError, shells_solid
 from .surface import NurbsSurface
 from .tessellate import default_tolerance
 
 FORMAT_VERSION = 1
 UNITS_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
-MAX_SIZE_MM = 10_000.0  # 10 m: larger than any printer; past it the float maths of placement breaks down
 DEFAULT_COLOR = (0.8, 0.55, 0.2, 1.0)
 DEFAULT_THICKNESS_MM = 2.0
-
-
-@dataclass
-class Placement:
-    """Where the model sits on its marker.
-
-    size_mm: largest extent of the model on the marker, millimetres;
-    offset: translation in the marker frame (x right, y up the marker, z out
-    of it), millimetres, applied last; rotation_deg: rotations about x, y, z
-    (applied in that order) before scaling.
-    """
-
-    size_mm: float = 50.0
-    offset: tuple = (0.0, 0.0, 0.0)
-    rotation_deg: tuple = (0.0, 0.0, 0.0)
-
-    def __post_init__(self):
-        # A single angle turns the model about the marker normal (z), as the GUI edits it.
-        if np.isscalar(self.rotation_deg):
-            self.rotation_deg = (0.0, 0.0, float(self.rotation_deg))
-        self.size_mm = float(self.size_mm)
-        self.offset = tuple(float(x) for x in self.offset)
-        self.rotation_deg = tuple(float(x) for x in self.rotation_deg)
-
-    @classmethod
-    def from_any(cls, value, default: "Placement | None" = None) -> "Placement":
-        """A Placement from a Placement, None (the default), or a dict with some of size_mm, offset (mm)
-        and rotation_deg (x, y, z degrees, or one angle about the anchor normal); missing keys from `default`."""
-        base = default or cls()
-        if value is None:
-            return base
-        if isinstance(value, Placement):
-            return value
-        if not isinstance(value, dict):
-            raise TypeError(f"a placement must be a Placement or a dict, got {type(value).__name__}")
-        unknown = set(value) - {"size_mm", "offset", "rotation_deg"}
-        if unknown:
-            raise ModelError("placement", f"unknown key(s) {', '.join(sorted(unknown))}; "
-                             "use size_mm, offset (mm) and rotation_deg (x, y, z degrees)")
-        size = check_size_mm(value.get("size_mm", base.size_mm), "placement.size_mm")
-        place = cls(size, value.get("offset", base.offset), value.get("rotation_deg", base.rotation_deg))
-        if len(place.offset) != 3 or len(place.rotation_deg) != 3:
-            raise ModelError("placement", "offset and rotation_deg need three components (x, y, z)")
-        return place
-
-    def rotation(self) -> np.ndarray:
-        """3x3 rotation R = Rz @ Ry @ Rx."""
-        ax, ay, az = np.radians(self.rotation_deg)
-        rx = np.array([[1, 0, 0], [0, math.cos(ax), -math.sin(ax)], [0, math.sin(ax), math.cos(ax)]])
-        ry = np.array([[math.cos(ay), 0, math.sin(ay)], [0, 1, 0], [-math.sin(ay), 0, math.cos(ay)]])
-        rz = np.array([[math.cos(az), -math.sin(az), 0], [math.sin(az), math.cos(az), 0], [0, 0, 1]])
-        return rz @ ry @ rx
 
 
 @dataclass
@@ -153,28 +101,9 @@ class Model:
 
     # ------------------------------------------------------------ placement
     def placement_matrix(self, unit: str = "mm") -> np.ndarray:
-        """4x4 map from model units to the marker frame (mm, or m with unit="m").
-
-        Rotates by placement.rotation_deg, scales so the largest extent is
-        placement.size_mm, centres the model over the marker (x, y) standing on
-        it (lowest z = 0), then adds placement.offset.
-        """
-        rot = self.placement.rotation()
-        lo, hi = self.bounds()
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        rc = corners @ rot.T
-        extent = float((rc.max(axis=0) - rc.min(axis=0)).max())
-        scale = self.placement.size_mm / extent if extent > 0 else 1.0
-        rlo, rhi = rc.min(axis=0) * scale, rc.max(axis=0) * scale
-        shift = -np.array([(rlo[0] + rhi[0]) / 2, (rlo[1] + rhi[1]) / 2, rlo[2]]) + np.asarray(self.placement.offset)
-        m = np.eye(4)
-        m[:3, :3] = scale * rot
-        m[:3, 3] = shift
-        if unit == "m":
-            m[:3] *= 1e-3
-        elif unit != "mm":
-            raise ValueError(f"unit must be 'mm' or 'm', got {unit!r}")
-        return m
+        """4x4 map from model units to the marker frame (mm, or m with unit="m"): `Placement.matrix` of
+        this model's bounds."""
+        return self.placement.matrix(self.bounds(), unit)
 
     def transformed(self, matrix) -> "Model":
         """A copy with the geometry mapped by a 4x4 matrix (nets mapped exactly)."""
@@ -241,17 +170,6 @@ def load_model(path) -> Model:
         raise type(exc)(f"{path}: {exc.field}" if exc.field else str(path), exc.problem) from None
     model.path = path
     return model
-
-
-def check_size_mm(size, where: str = "size") -> float:
-    """`size` (mm) as a float when it is a usable part size, 0 < size <= MAX_SIZE_MM; else ModelError at `where`."""
-    try:
-        value = float(size)
-    except (TypeError, ValueError):
-        raise ModelError(where, f"must be a number of millimetres, got {size!r}") from None
-    if not (math.isfinite(value) and 0 < value <= MAX_SIZE_MM):
-        raise ModelError(where, f"must be a positive number of millimetres up to {fmt(MAX_SIZE_MM)}, got {size!r}")
-    return value
 
 
 def _load_mesh(path: Path) -> Model:

@@ -11,6 +11,7 @@ import numpy as np
 from . import basis
 from .curve import check_weights, denominator_problem
 from .errors import DenominatorError, GeometryError, fmt
+from .tessellate import tessellate_surface
 
 _CHUNK = 1 << 15  # points per gather, bounds memory at ~(p+1)(q+1)*4*8*_CHUNK bytes
 
@@ -243,8 +244,6 @@ class NurbsSurface:
     # ----------------------------------------------------------- display/mesh
     def tessellate(self, count=None, step=None, tolerance=None):
         """Triangle mesh of the surface (trimesh.Trimesh, model units); see tessellate.py."""
-        from .tessellate import tessellate_surface  # tessellate imports this module (a cycle)
-
         return tessellate_surface(self, count=count, step=step, tolerance=tolerance)
 
     def isolines(self, n_u: int = 8, n_v: int = 8, samples: int = 64) -> list[np.ndarray]:

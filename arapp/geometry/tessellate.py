@@ -6,11 +6,15 @@ same winding, so face normals follow S_u x S_v; vertex normals are analytic.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 import trimesh
 
 from .errors import GeometryError
-from .surface import NurbsSurface
+
+if TYPE_CHECKING:  # annotations only: surface.py imports this module for NurbsSurface.tessellate
+    from .surface import NurbsSurface
 
 MAX_SAMPLES = 1025  # per direction: a cap so a bad tolerance cannot eat the memory
 

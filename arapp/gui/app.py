@@ -9,9 +9,9 @@ from pathlib import Path
 from PySide6.QtCore import QTimer
 from PySide6.QtWidgets import QApplication
 
-from arapp.app.toolpaths import preview_spec
+from arapp.engine.toolpaths import preview_spec
 from arapp.gui.main_window import MainWindow
-from arapp.gui.remote import warm_up
+from arapp.gui.hosts.remote import warm_up
 
 
 def ensure_platform() -> None:
@@ -104,12 +104,13 @@ class ScreenshotRun:
 
 def run_gui(source: str | None = None, model: str | None = None, frames: int | None = None,
             screenshot: str | None = None, settings=None, toolpaths: str | None = None, printer: str | None = None,
-            layer: int | None = None, anchors: list | None = None) -> int:
+            layer: int | None = None, anchors: list | None = None, scene: str | None = None) -> int:
     """Open the window; with `frames`, run that many frames, save `screenshot` (when given) and return.
 
     toolpaths: a G-code file shown on the printer bed (the print preview), placed by the printer profile
     `printer` (its bed anchor is the source's first anchor); layer: show layers up to this one (0-based);
-    anchors: session.json anchor blocks to track from now on (as Tracking > Anchors sets them)."""
+    anchors: session.json anchor blocks to track from now on (as Tracking > Anchors sets them); scene: a saved
+    scene file (.arscene) to track against, its model shown where it was placed."""
     if frames is not None and not source:
         raise ValueError("--frames needs --source (a recording, a video or a camera)")
     ensure_platform()
@@ -122,6 +123,8 @@ def run_gui(source: str | None = None, model: str | None = None, frames: int | N
         window.session.set_anchors_json(anchors)
     if toolpaths:
         window.set_toolpaths(preview_spec(toolpaths, printer, layer))
+    if scene:
+        window.session.scenes.open(scene)
     if model:
         window.open_model(model)
     if source:
@@ -130,6 +133,10 @@ def run_gui(source: str | None = None, model: str | None = None, frames: int | N
         last = window.session.recent("recent_sources")
         if frames is None and last and Path(last[0]).is_dir():
             window.statusBar().showMessage(f"Last source: {last[0]} (File > Recent sources)", 8000)
+    if not scene and frames is None and window.session.scenes.last():
+        # offered, not forced: a scene made on another desk would only confuse a new session
+        window.statusBar().showMessage(f"Last scene: {Path(window.session.scenes.last()).name} "
+                                       "(File > Reopen last scene)", 8000)
     if frames is None:
         code = app.exec()
         return int(code)

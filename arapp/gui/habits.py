@@ -13,7 +13,7 @@ from pathlib import Path
 from PySide6.QtGui import QKeySequence
 from PySide6.QtWidgets import QFileDialog, QPushButton
 
-from arapp.app.capture import new_capture_path
+from arapp.engine.capture import new_capture_path
 from arapp.app.model_export import export_filter, export_suffixes
 from arapp.app.window_state import control_state, window_title
 from arapp.gui.menus import _action
@@ -154,5 +154,4 @@ class Habits:
 
 
 def install_habits(window) -> Habits:
-    window.habits = Habits(window)
-    return window.habits
+    return Habits(window)

@@ -18,26 +18,26 @@ from PySide6.QtCore import QSettings, Qt, QTimer, Signal
 from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow, QVBoxLayout, QWidget
 
 from arapp.app import sheets
-from arapp.app.editing import library_thumbnails
+from arapp.engine.editing import library_thumbnails
 from arapp.app.paint_stats import PaintStats
 from arapp.app.session import Session, as_bool
-from arapp.gui.anchor_offer import install as install_anchor_offer
+from arapp.gui.panels.anchor_offer import install as install_anchor_offer
 from arapp.gui.errors import ErrorBoxes
-from arapp.gui.first_hour import install as install_first_hour
+from arapp.gui.first_hour.pieces import install as install_first_hour
 from arapp.gui.habits import install_habits
-from arapp.gui.marker_marks import install_marks
-from arapp.gui.orbit_view import install_orbit
+from arapp.gui.overlays.marker_marks import install_marks
+from arapp.gui.overlays.orbit_view import install_orbit
 from arapp.gui.menus import build_menus, update_recent_menus
 from arapp.gui.panels.model import MODEL_FILTER, ModelPanel, library_files
 from arapp.gui.panels.replay import ReplayBar
 from arapp.gui.panels.tracking import AnchorsDialog, TrackingPanel
-from arapp.gui.print_dialog import PrintDialog
-from arapp.gui.print_panel import show_print_panel
-from arapp.gui.scan_panel import install_scan
+from arapp.gui.print.dialog import PrintDialog
+from arapp.gui.print.panel import show_print_panel
+from arapp.gui.panels.scan import install_scan
 from arapp.gui.source_dialog import SourceDialog, ask_recording, ask_video_spec
 from arapp.gui.tasks import QtRunner, Task, init_ui_bridge, on_ui
 from arapp.gui.view import VideoView
-from arapp.gui.workers import make_engine
+from arapp.gui.hosts.local import make_engine
 
 
 def app_settings() -> QSettings:
@@ -78,12 +78,12 @@ class MainWindow(QMainWindow):
         self._status_timer.timeout.connect(self._refresh_status)
         self._status_timer.timeout.connect(self.session.tick)  # the session's clock: a silent source is given up
         self._status_timer.start()
-        install_habits(self)  # undo/redo, export, screenshot, AR video, title, controls enabled when they can act
-        install_first_hour(self)  # welcome, calibration banner + wizard, lost hint, printer set-up, Help
-        install_anchor_offer(self)  # "Found a 4x3 ... board: use it?" when the anchors give no pose
+        self.habits = install_habits(self)  # undo/redo, export, screenshot, AR video, title, controls enabled when they can act
+        self.first_hour = install_first_hour(self)  # welcome, calibration banner + wizard, lost hint, printer set-up, Help
+        self.anchor_offer = install_anchor_offer(self)  # "Found a 4x3 ... board: use it?" when the anchors give no pose
         install_scan(self)  # scan mode: the Scan dock and the dome of view directions over the view
         install_marks(self)  # detected markers outlined with their axes (View menu toggle)
-        install_orbit(self)  # the model in 3D when there is nothing to put it on
+        self.orbit_view = install_orbit(self)  # the model in 3D when there is nothing to put it on
         QTimer.singleShot(0, self._start_thumbnails)
         QTimer.singleShot(0, self.freeze_heap)
 
@@ -337,7 +337,7 @@ class MainWindow(QMainWindow):
         show_print_panel(self, self._print_dialog)  # beside the view, which shows the bed preview
 
     def set_toolpaths(self, spec: dict | None) -> None:
-        """Show the print preview `spec` (arapp.app.toolpaths.preview_spec) on the bed; None clears it."""
+        """Show the print preview `spec` (arapp.engine.toolpaths.preview_spec) on the bed; None clears it."""
         self.session.set_toolpaths(spec)
 
     # -- drag and drop, closing ------------------------------------------------------------

@@ -5,6 +5,8 @@ from __future__ import annotations
 from PySide6.QtCore import Qt
 from PySide6.QtGui import QAction, QKeySequence
 
+from arapp.gui.scene_actions import add_scene_actions
+
 
 def _action(window, text: str, slot, shortcut=None, menu=None) -> QAction:
     a = QAction(text, window)
@@ -29,6 +31,8 @@ def build_menus(w) -> None:
     _action(w, "Open model...", w.choose_model, "Ctrl+M", file_menu)
     w.recent_sources_menu = file_menu.addMenu("Recent sources")
     w.recent_models_menu = file_menu.addMenu("Recent models")
+    file_menu.addSeparator()
+    add_scene_actions(w, file_menu)   # saved scenes: open, save, save as, reopen the last one
     file_menu.addSeparator()
     w.print_action = _action(w, "Print...", w.open_print_dialog, "P", file_menu)
     file_menu.addSeparator()

@@ -17,7 +17,7 @@ from PySide6.QtWidgets import (
     QVBoxLayout,
 )
 
-from arapp.app import sourcespec
+from arapp.engine import sourcespec
 from arapp.gui.tasks import Task
 
 
@@ -42,7 +42,7 @@ def ask_video(parent) -> tuple[str, str | None] | None:
 
 def ask_video_spec(parent, report) -> str | None:
     """Ask for a video and its calibration: the source spec, or None when cancelled. Without a calibration
-    the video opens with a stored or estimated camera (arapp.camera_store); `report` is kept for callers."""
+    the video opens with a stored or estimated camera (arapp.store.camera_store); `report` is kept for callers."""
     chosen = ask_video(parent)
     if chosen is None:
         return None

@@ -28,7 +28,7 @@ from arapp.printing.link.webapi import ApiKeyError, load_api_key, save_api_key
 from arapp.printing.link.serial_link import SerialPrinter
 from arapp.printing.presets import preset_profile
 from arapp.printing.profile import load_profile
-from arapp.user_config import secret_path
+from arapp.store.user_config import secret_path
 
 # a serial check gives up after this long without an `ok` (the printer's 15 s default is for prints)
 SERIAL_CHECK_TIMEOUT_S = 6.0
@@ -112,7 +112,7 @@ def check_octoprint(url: str, api_key: str, timeout_s: float = 5.0) -> CheckResu
 
 def check_moonraker(url: str, api_key: str | None = None, timeout_s: float = 5.0) -> CheckResult:
     """Ask Moonraker at `url` for its version and whether Klipper is ready (no key: a trusted client)."""
-    from arapp.printing.link.moonraker import check_moonraker as check
+    from arapp.printing.link.moonraker import check_moonraker as check  # the Moonraker link: only when checked
 
     ok, summary, details = check(url, api_key or None, timeout_s)
     return CheckResult(ok, summary, details)
@@ -155,7 +155,7 @@ def stored_octoprint_key(url: str) -> str | None:
 
 def saved_target(choice: dict):
     """The printer-link target (arapp.printing.link.factory SerialTarget / OctoPrintTarget / MoonrakerTarget) of a saved
-    printer set-up (arapp.gui.printer_setup.saved_choice()), or None when it names no port or server.
+    printer set-up (arapp.gui.print.printer_setup.saved_choice()), or None when it names no port or server.
     An OctoPrint target points at the stored key file."""
     if choice.get("link") == "octoprint":
         url = str(choice.get("url") or "").strip().rstrip("/")

@@ -1,14 +1,13 @@
 """The model as displayed, as a printable solid in the bed frame (mm), and STL/3MF files.
 
 `placed_solid` takes the model's placement on the anchor (size, offset and turn
-about the anchor normal, arapp.placement) to millimetres with the anchor's
+about the anchor normal, arapp.geometry.placement) to millimetres with the anchor's
 out-of-paper normal as +Z, makes it watertight (thickening an open patch),
 drops it onto the bed (lowest point at z = 0) and centres it on the bed.
 """
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +23,7 @@ from arapp.exchange.meshes import (  # noqa: F401
     write_atomic,
     write_mesh,
 )
-from arapp.placement import placement_from_any, placement_from_model
+from arapp.geometry.placement import Placement
 
 from .profile import load_profile
 
@@ -77,37 +76,20 @@ def _is_model(obj) -> bool:
     return not isinstance(obj, trimesh.Trimesh) and callable(getattr(obj, "mesh", None))
 
 
-def _as_matrix(placement) -> np.ndarray | None:
-    """`placement` as a 4x4 model -> placement-frame (mm) matrix when it is one, else None."""
-    if isinstance(placement, (np.ndarray, list, tuple)):
-        M = np.asarray(placement, dtype=float)
-        if M.shape != (4, 4) or not np.all(np.isfinite(M)):
-            raise ValueError("a placement given as a matrix must be a finite 4x4 map (model units -> placement mm)")
-        return M
-    return None
-
-
-def _model_matrix(model, placement) -> np.ndarray:
+def _model_matrix(model, placement: Placement | None) -> np.ndarray:
     """4x4 from the model's units to the placement frame (mm, +Z out of the paper), as the model is displayed."""
-    M = _as_matrix(placement)
-    if M is not None:
-        return M
     if placement is None:
         return np.asarray(model.placement_matrix("mm"), dtype=float)
-
-    shown = dataclasses.replace(model, placement=placement_from_any(placement, model.placement))
-    return np.asarray(shown.placement_matrix("mm"), dtype=float)
+    return np.asarray(placement.matrix(model.bounds(), "mm"), dtype=float)
 
 
-def placed_solid(mesh_or_model, placement=None, *, thickness_mm: float = 2.0, profile=None,
+def placed_solid(mesh_or_model, placement: Placement | None = None, *, thickness_mm: float = 2.0, profile=None,
                  center: bool = True) -> trimesh.Trimesh:
     """The model as displayed, as a watertight solid in the bed frame (mm).
 
     `mesh_or_model`: an arapp.geometry Model or a trimesh.Trimesh.
-    `placement`: a 4x4 matrix from model units to the anchor's placement frame
-    in mm (what `Model.placement_matrix("mm")` gives), an
-    arapp.geometry Placement or a dict for `arapp.placement.placement_from_any`
-    (missing keys from the model's own placement), or None: the model's own
+    `placement`: where the model sits on the anchor (arapp.geometry.placement.Placement;
+    a dict from outside becomes one through `Placement.from_any`), or None: the model's own
     placement; for a Trimesh, None means it is already in mm with +Z up.
     A model's open surfaces are closed by `Model.solid` with walls of
     `thickness_mm` (in placed millimetres); an open Trimesh patch is thickened
@@ -126,10 +108,7 @@ def placed_solid(mesh_or_model, placement=None, *, thickness_mm: float = 2.0, pr
     elif isinstance(mesh_or_model, trimesh.Trimesh):
         mesh = mesh_or_model.copy()
         if placement is not None:
-            M = _as_matrix(placement)
-            if M is None:
-                M = placement_from_model(mesh.bounds, placement)
-            mesh.apply_transform(M)
+            mesh.apply_transform(placement.matrix(mesh.bounds, "mm"))
     else:
         raise TypeError(f"placed_solid needs a trimesh.Trimesh or an arapp.geometry Model, got {type(mesh_or_model).__name__}")
     if len(mesh.faces) == 0:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .slicer.planner import KIND_TYPES, LayerToolpaths
+from .toolpath import KIND_TYPES, LayerToolpaths
 
 # ---------------------------------------------------------------- writer
 

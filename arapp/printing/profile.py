@@ -17,7 +17,7 @@ import numpy as np
 from arapp.exchange.files import DocumentFormat, register_document
 from arapp.exchange.jsonfile import read_json
 from tracking.errors import SessionError
-from tracking.session import parse_anchor, parse_rigid
+from tracking.recording.schema import parse_anchor, parse_rigid
 
 FORMAT = "arapp-printer/1"
 PROFILES_DIR = Path(__file__).with_name("profiles")
@@ -61,7 +61,7 @@ class PrinterProfile:
     start_gcode: str
     end_gcode: str
     link: LinkSettings
-    bed_anchor: object | None          # tracking.session.AnchorSpec, or None
+    bed_anchor: object | None          # tracking.recording.schema.AnchorSpec, or None
     bed_from_anchor: np.ndarray | None  # 4x4, anchor frame (mm) -> bed frame (mm)
     source: str = "<generic>"
     max_hotend_temperature: float = 300.0  # °C; slicing settings and jobs above it are refused

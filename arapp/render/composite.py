@@ -14,19 +14,23 @@ import numpy as np
 def over_bgr(frame_bgr: np.ndarray, premul_rgba: np.ndarray, x0: int, y0: int) -> None:
     """Composite a premultiplied RGBA crop over `frame_bgr` in place, with its top-left at (x0, y0).
 
-    out = fg + bg * (1 - alpha), only inside the crop; pixels with alpha 0 are left bit-exact.
-    The crop must lie inside the frame.
+    out = fg + round(bg * (255 - alpha) / 255), saturated at 255, only inside the crop; pixels with
+    alpha 0 are left bit-exact. The crop must lie inside the frame.
+
+    Integer maths through OpenCV's vectorised uint8 kernels: cv2.multiply rounds bg * (255 - alpha) / 255
+    to the nearest integer (never a tie: the quotient is at least 1/510 from any .5) and cv2.add
+    saturates, which is exactly the float formula `clip(bg * (1 - alpha / 255) + fg + 0.5)` truncated,
+    at a fraction of the cost (no float32 copies of the crop).
     """
     h, w = premul_rgba.shape[:2]
-    roi = frame_bgr[y0:y0 + h, x0:x0 + w]
-    alpha = premul_rgba[..., 3]
-    if not alpha.any():
-        return
-    fg = premul_rgba[..., 2::-1].astype(np.float32)  # RGB -> BGR
-    inv = (255.0 - alpha.astype(np.float32))[..., None] * (1.0 / 255.0)
-    out = roi.astype(np.float32) * inv + fg
-    np.clip(out + 0.5, 0.0, 255.0, out=out)
-    roi[...] = out.astype(np.uint8)
+    roi = frame_bgr[y0:y0 + h, x0:x0 + w]  # a view: the kernels below write into the frame
+    inv = cv2.bitwise_not(premul_rgba[..., 3])  # 255 - alpha
+    bg = cv2.multiply(roi, cv2.merge((inv, inv, inv)), scale=1.0 / 255.0)
+    fg = cv2.cvtColor(premul_rgba, cv2.COLOR_RGBA2BGR)
+    if roi.strides[1:] == (3, 1):
+        cv2.add(fg, bg, dst=roi)
+    else:  # a frame OpenCV cannot write into (e.g. a channel view of BGRA): add, then copy in
+        roi[...] = cv2.add(fg, bg)
 
 
 def unpremultiply(premul_rgba: np.ndarray) -> np.ndarray:

@@ -145,7 +145,7 @@ def create_context(width: int, height: int):
             device = egl.get_default_device()
             plat = egl.EGLPlatform(width, height, device=device)
         else:
-            from pyrender.platforms.osmesa import OSMesaPlatform
+            from pyrender.platforms.osmesa import OSMesaPlatform  # OSMesa: only where EGL is not used
 
             plat = OSMesaPlatform(width, height)
         plat.init_context()
@@ -170,7 +170,7 @@ def release_context(plat, name: str) -> None:
     if name != "egl":
         plat.delete_context()
         return
-    from OpenGL.EGL import EGL_NO_CONTEXT, EGL_NO_SURFACE, eglDestroyContext, eglMakeCurrent
+    from OpenGL.EGL import EGL_NO_CONTEXT, EGL_NO_SURFACE, eglDestroyContext, eglMakeCurrent  # EGL platform only
 
     dpy, ctx = plat._egl_display, plat._egl_context
     if dpy is None:

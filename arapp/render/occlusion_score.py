@@ -13,7 +13,7 @@ import trimesh
 
 from arapp.render import occlusion
 from tracking.poses import invert, read_tum
-from tracking.session import load_session
+from tracking.recording.schema import load_session
 from tracking.sources.recording import RecordingSource
 from tracking.synth.occlusion import MASK_HIDDEN, MASK_VISIBLE, edge_error_px, iou, read_truth
 

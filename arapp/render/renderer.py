@@ -29,6 +29,9 @@ from tracking.camera import Camera
 from tracking.errors import CalibrationError
 
 _MESH_CACHE_SIZE = 16
+#: framebuffers are sized to the crop, rounded up to this many output pixels per axis, so that a model
+#: moving a little does not reallocate them every frame
+_FBO_STEP = 16
 _LINESET_CACHE_SIZE = 64
 
 
@@ -93,8 +96,9 @@ class OverlayRenderer:
         self._shadow_prog = programs.build_program(programs.SHADOW_VS, programs.SHADOW_FS)
         self.gl_renderer = GL.glGetString(GL.GL_RENDERER).decode(errors="replace")
         antialias = self._antialias_request
+        software = any(k in self.gl_renderer.lower() for k in ("llvmpipe", "softpipe", "swrast", "software"))
+        self._software = software
         if antialias == "auto":
-            software = any(k in self.gl_renderer.lower() for k in ("llvmpipe", "softpipe", "swrast", "software"))
             antialias = "ssaa" if software else "msaa"
         self.antialias = antialias
         max_samples = int(GL.glGetIntegerv(GL.GL_MAX_SAMPLES))
@@ -103,7 +107,10 @@ class OverlayRenderer:
         self.cull = True  # back-face culling of closed meshes (switchable for comparisons)
         self._fbo = self._resolve = None
         self._fbo_size = (0, 0)
-        self._alloc_framebuffers(self._und_limits[2], self._und_limits[3])  # crop size in output pixels
+        # sized to the crop on each draw (see _fit_framebuffers): a framebuffer much larger than what is
+        # drawn costs a CPU rasteriser per frame (clearing, binning) even outside the scissor box
+        self._alloc_framebuffers(min(self.width, 8 * _FBO_STEP), min(self.height, 8 * _FBO_STEP))
+        self._readback = None  # reused read-back buffer of the supersampled crop
         self._memo = None  # (key, last crop): see _render_crop
         self._read_depth, self._last_depth = False, None  # the model's depth, read once an occlusion asks
         self._lines_cache: OrderedDict[tuple, tuple] = OrderedDict()  # see _collect_lines
@@ -231,6 +238,7 @@ class OverlayRenderer:
         self._free_framebuffers()
         max_rb = int(int(GL.glGetIntegerv(GL.GL_MAX_RENDERBUFFER_SIZE)) / self.ss)
         w, h = min(w, max_rb), min(h, max_rb)
+        self._fbo_max = max_rb
         self._fbo_size = (w, h)  # in output pixels; the buffers hold ss times that
         w, h = int(np.ceil(w * self.ss)), int(np.ceil(h * self.ss))
 
@@ -252,6 +260,32 @@ class OverlayRenderer:
         self._fbo = fbo(self.samples)
         self._resolve = fbo(0) if self.samples > 0 else None
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
+
+    def _fit_framebuffers(self, w: int, h: int) -> tuple[int, int]:
+        """Make the framebuffers hold a w x h crop (output pixels) without being much larger; returns
+        the crop size they hold (smaller only beyond the GL renderbuffer limit).
+
+        Each frame clears the whole framebuffers (see _render_crop_gl), which on a CPU rasteriser costs
+        in proportion to their area, and reallocating them costs little (measured on llvmpipe with the
+        bench's 720p torus: a framebuffer fitted to every crop anew beat one with 1.5x room per axis).
+        So there they grow to 5 % beyond the crop and shrink once they hold 1.5 times its area. On a GPU
+        clearing is nearly free and a reallocation may stall the driver: 1.5x room, shrink at 4x the area.
+        """
+        room, shrink = (1.05, 1.5) if self._software else (1.5, 4.0)
+        fw, fh = self._fbo_size
+        mx = self._fbo_max  # beyond the GL limit the crop is cut, not the framebuffer grown
+        too_small = (w > fw and fw < mx) or (h > fh and fh < mx)
+        if too_small or fw * fh > shrink * w * h:
+            if not too_small:
+                fw = fh = 0  # shrinking: size to this crop alone
+
+            def size(n, limit):  # with room, but not beyond the largest possible crop
+                n = min(int(n * room), max(limit, n))
+                return -(-n // _FBO_STEP) * _FBO_STEP
+
+            self._alloc_framebuffers(size(max(w, fw), self._und_limits[2]), size(max(h, fh), self._und_limits[3]))
+            fw, fh = self._fbo_size
+        return min(w, fw), min(h, fh)
 
     def _free_framebuffers(self) -> None:
         GL = self.GL
@@ -447,11 +481,8 @@ class OverlayRenderer:
                 return None
         else:
             out_crop = crop
-        w, h = crop[2], crop[3]
-        if w > self._fbo_size[0] or h > self._fbo_size[1]:
-            self._alloc_framebuffers(max(w, self._fbo_size[0]), max(h, self._fbo_size[1]))
-            w, h = min(w, self._fbo_size[0]), min(h, self._fbo_size[1])
-            crop = (crop[0], crop[1], w, h)
+        w, h = self._fit_framebuffers(crop[2], crop[3])
+        crop = (crop[0], crop[1], w, h)
 
         # 3. draw
         P = projection.gl_projection(self.K, crop, near, far)
@@ -461,14 +492,16 @@ class OverlayRenderer:
         sw, sh = int(round(w * ss)), int(round(h * ss))
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self._fbo[0])
         GL.glViewport(0, 0, sw, sh)
-        # clear (and draw) only the crop: clearing the whole multisampled buffer costs more than drawing
-        GL.glScissor(0, 0, sw, sh)
-        GL.glEnable(GL.GL_SCISSOR_TEST)
+        # the framebuffers are sized to the crop (_fit_framebuffers), so the whole of them is cleared: a
+        # scissored clear is drawn as a quad through the fragment pipeline, a full one is a plain fill
+        GL.glDisable(GL.GL_SCISSOR_TEST)
         GL.glClearColor(0.0, 0.0, 0.0, 0.0)
         GL.glClearDepth(1.0)
         GL.glDepthMask(GL.GL_TRUE)
         GL.glColorMask(GL.GL_TRUE, GL.GL_TRUE, GL.GL_TRUE, GL.GL_TRUE)
         GL.glClear(GL.GL_COLOR_BUFFER_BIT | GL.GL_DEPTH_BUFFER_BIT)
+        GL.glScissor(0, 0, sw, sh)  # draw only into the crop
+        GL.glEnable(GL.GL_SCISSOR_TEST)
         GL.glEnable(GL.GL_DEPTH_TEST)
         GL.glDisable(GL.GL_CULL_FACE)
         GL.glEnable(GL.GL_BLEND)
@@ -509,7 +542,14 @@ class OverlayRenderer:
             GL.glBlitFramebuffer(0, 0, sw, sh, 0, 0, sw, sh, GL.GL_COLOR_BUFFER_BIT, GL.GL_NEAREST)
             GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._resolve[0])
         GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)
-        buf = np.empty((sh, sw, 4), np.uint8)
+        if (sw, sh) != (w, h):
+            # read into a reused buffer; the downsample below makes the crop that is kept
+            rb = self._readback
+            if rb is None or rb.size < sw * sh * 4:
+                rb = self._readback = np.empty(sw * sh * 4, np.uint8)
+            buf = rb[:sw * sh * 4].reshape(sh, sw, 4)
+        else:
+            buf = np.empty((sh, sw, 4), np.uint8)  # returned (and memoised) as it is
         GL.glReadPixels(0, 0, sw, sh, GL.GL_RGBA, GL.GL_UNSIGNED_BYTE, buf)
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
         if self._read_depth:  # for occlusion: the model's depth on the same pixels as the crop
@@ -545,7 +585,11 @@ class OverlayRenderer:
             GL.glCullFace(GL.GL_BACK)
         if alpha >= 1.0:
             GL.glDepthFunc(GL.GL_LESS)
+            # opaque: "over" with alpha 1 writes the source unchanged, so blending (reading the colour
+            # buffer back per fragment) is switched off, the same pixels for less rasteriser work
+            GL.glDisable(GL.GL_BLEND)
             g.surface.draw(GL.GL_TRIANGLES)
+            GL.glEnable(GL.GL_BLEND)
         else:
             # depth pre-pass, then colour of the nearest layer only: order-independent translucency
             GL.glDepthFunc(GL.GL_LESS)

@@ -23,6 +23,7 @@ import numpy as np
 from tracking.anchors.dictionaries import aruco_dictionary
 from tracking.anchors.model import AnchorModel
 from tracking.anchors.edges import refine_squares
+from tracking.anchors.pose import project
 from tracking.camera import Camera
 
 # the detector families (AnchorKind.detector) found here; "qr" anchors are qr.py's
@@ -189,7 +190,6 @@ class ArucoDetection:
         Returns None (detect instead) when fewer than `min_fraction` of the markers are re-found, or when
         a ChArUco board is among them (its chessboard corners need the detector).
         """
-        from tracking.anchors.pose import project  # pose imports this module (a cycle)
         keys = sorted(keys)
         if not keys:
             return None

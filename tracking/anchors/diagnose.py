@@ -25,7 +25,8 @@ from tracking.anchors.kinds.qr import normal_text
 from tracking.anchors.model import build_models
 from tracking.anchors.pose import solve_pose
 from tracking.camera import Camera
-from tracking.session import AnchorSpec, aruco_dictionary_names
+from tracking.anchors.kinds import AnchorSpec
+from tracking.anchors.kinds.base import aruco_dictionary_names
 
 # the largest dictionary of each family: a marker of a smaller one is found in it with the same id
 _FAMILIES = ["DICT_4X4_1000", "DICT_5X5_1000", "DICT_6X6_1000", "DICT_7X7_1000", "DICT_ARUCO_ORIGINAL",

@@ -16,7 +16,7 @@ from tracking.anchors.kinds.charuco import charuco_board
 from tracking.anchors.kinds.qr import normal_text
 from tracking.errors import SessionError
 from tracking.poses import transform_points
-from tracking.session import AnchorSpec
+from tracking.anchors.kinds import AnchorSpec
 
 # square_corners, grid_board and charuco_board live with their kinds (tracking/anchors/kinds); named here too
 __all__ = ["AnchorModel", "build_models", "square_corners", "grid_board", "charuco_board"]

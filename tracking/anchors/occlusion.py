@@ -21,6 +21,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from tracking.anchors.edges import refine_squares
+from tracking.anchors.pose import project
+from tracking.camera import Camera
+
 OUTSIDE = (0.3, 0.5, 0.7)   # cells beyond the edge sampled in the white margin
 INSIDE = (0.35, 0.6)        # cells inside the edge sampled in the black border
 MIN_CELL_PX = 4.0           # below this the bands are within the blur: nothing can be judged
@@ -86,3 +90,30 @@ def is_covered(fractions: np.ndarray, min_fraction: float = 0.1) -> bool:
     """Whether the per-side covered fractions say the marker is partly covered (any side at least
     `min_fraction` covered: two of twenty samples, more than noise or a speck of dirt)."""
     return bool(np.max(fractions, initial=0.0) >= min_fraction)
+
+
+def refit_covered(camera: Camera, gray, model, ids, quads, bits: int, pred_cfw: np.ndarray, end_margin: float):
+    """Corners (M,4,2) of partly covered markers `ids` (their detected corners `quads`), found again on
+    their edges where the predicted pose `pred_cfw` puts them (shifted onto the detection), or None.
+
+    A fingertip on a marker's border drags the detector's contour, and the edge fit started from it,
+    toward the finger; started from the prediction instead, the middle of each side (where the
+    edge fit samples) is mostly uncovered and the corners come out where the sides' lines meet. The
+    refit is kept only where at least three corners of each marker land within a pixel and a half (or
+    0.15 cell) of the detected ones: the prediction and the uncovered part of the detection agree."""
+    world = np.concatenate([model.to_world(model.markers[int(i)]) for i in ids])
+    start, z = project(camera, pred_cfw, world)
+    if np.any(z <= 0.01):
+        return None
+    start = start.reshape(-1, 4, 2)
+    # a lagging prediction is mostly shifted: move it onto the detection by the median offset of the
+    # four corners (one dragged corner cannot pull a median of four far)
+    start = start + np.median(quads - start, axis=1)[:, None, :]
+    cell = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).min(axis=1) / bits
+    refined, ok = refine_squares(gray, start, cell, camera, consensus_px=0.35, end_margin=end_margin)
+    if not ok.all():
+        return None
+    near = np.linalg.norm(refined - quads, axis=2) <= np.maximum(1.5, 0.15 * cell)[:, None]
+    if (near.sum(axis=1) < 3).any():
+        return None
+    return refined

@@ -8,14 +8,17 @@ goes through camera.K and camera.dist.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
 
-from tracking.anchors.detect import Observation
 from tracking.anchors.numeric import median, row_norms
 from tracking.camera import Camera
 from tracking.poses import from_rvec_tvec, invert, rotation_angle, to_rvec_tvec
+
+if TYPE_CHECKING:  # annotations only: detect.py imports this module for `project`
+    from tracking.anchors.detect import Observation
 
 _LM_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 1e-10)
 

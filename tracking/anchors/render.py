@@ -16,7 +16,7 @@ from tracking.anchors.kinds.qr import qr_modules
 from tracking.anchors.model import AnchorModel, build_models
 from tracking.camera import Camera
 from tracking.poses import invert
-from tracking.session import AnchorSpec
+from tracking.anchors.kinds import AnchorSpec
 
 # qr_modules lives with the QR kind (tracking/anchors/kinds/qr.py); named here too
 __all__ = ["qr_modules", "plane_layout", "draw_anchor", "render_view", "look_at"]

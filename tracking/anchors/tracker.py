@@ -1,69 +1,29 @@
-"""AnchorTracker: the camera pose from a session's anchors, frame by frame; and the plain OpenCV baseline."""
+"""AnchorTracker: the camera pose from a session's anchors, frame by frame (its result: result.py; the plain
+OpenCV baseline: plain.py, both re-exported here)."""
 
 from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
-from tracking.anchors.dictionaries import aruco_dictionary
 from tracking.anchors.blur import MIN_MARKERS, fit_pose_and_stretch, marker_groups, marker_offsets, spread_enough
-from tracking.anchors.detect import ArucoDetection, Observation, detector_parameters
-from tracking.anchors.edges import edge_sharpness, refine_squares
+from tracking.anchors.desk import DeskPlane
+from tracking.anchors.detect import ArucoDetection, Observation
+from tracking.anchors.edges import edge_sharpness
 from tracking.anchors.filter import PoseFilter
+from tracking.anchors.hold import hold_to_corners
 from tracking.anchors.model import AnchorModel, build_models, square_corners
-from tracking.anchors.occlusion import covered_fraction, is_covered
+from tracking.anchors.occlusion import covered_fraction, is_covered, refit_covered
+from tracking.anchors.plain import plain_opencv_pose, to_gray  # noqa: F401  (plain_opencv_pose: re-exported)
 from tracking.anchors.numeric import median, row_norms
 from tracking.anchors.pose import planar_solutions, project, project_pixels, residuals, solve_pose
 from tracking.anchors.qr import QRTracking
+from tracking.anchors.result import AnchorResult
 from tracking.camera import Camera
-from tracking.poses import from_rvec_tvec, invert, rotation_angle, transform_points
-from tracking.session import AnchorSpec
-
-
-@dataclass
-class AnchorResult:
-    """What the anchors say about one frame.
-
-    world_from_camera: filtered pose (4x4) or None when no anchor was seen.
-    raw_world_from_camera: this frame's own solution (no filtering), or None.
-    markers: ArUco markers / QR codes detected and used; inliers: corner points in the final PnP.
-    reprojection_error: RMS pixels of the final solution (nan if none).
-    object_points (N,3) world metres / image_points (N,2) distorted pixels: the inlier correspondences.
-    anchors_seen: indices into the anchors list; ms: processing time of this frame.
-    covered: the pose rests on markers whose white margin is partly covered (a hand reaching in): its
-    corners may be off by pixels, the filter gave it little weight, and a caller with another source
-    of pose (map, optical flow) should prefer that one.
-    refitted: a marker's margin was partly covered, but its corners were found again on the uncovered
-    parts of its edges (AnchorTracker._refit_covered); the measurement counts `refit_weight` in the filter.
-    rejected: anchors (indices) detected this frame but left out as inconsistent: never seen before
-    in this session and far from where the reference pose puts them (a look-alike pattern).
-    """
-
-    world_from_camera: np.ndarray | None = None
-    raw_world_from_camera: np.ndarray | None = None
-    markers: int = 0
-    inliers: int = 0
-    reprojection_error: float = float("nan")
-    object_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    image_points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
-    anchors_seen: list[int] = field(default_factory=list)
-    ms: float = 0.0
-    covered: bool = False
-    refitted: bool = False
-    rejected: list[int] = field(default_factory=list)
-
-
-def to_gray(image: np.ndarray) -> np.ndarray:
-    """uint8 gray from a gray or BGR(A) image."""
-    if image.ndim == 2:
-        return image
-    if image.shape[2] == 4:
-        return cv2.cvtColor(image, cv2.COLOR_BGRA2GRAY)
-    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+from tracking.poses import invert, rotation_angle, transform_points
+from tracking.anchors.kinds import AnchorSpec
 
 
 class AnchorTracker:
@@ -102,6 +62,10 @@ class AnchorTracker:
     hold_sigmas: the filtered pose never projects the anchor points it rests on further than this many
     times the measurement's pixel noise from where the frame's own solution does (`_hold_to_corners`; the
     filter's lag behind an accelerating camera or anchor); 0 turns the hold off.
+    desk / desk_ambiguous_px: a lone square marker whose two IPPE poses both fit its corners within
+    `desk_ambiguous_px` RMS (small, seen nearly head-on) is judged by the desk around it (desk.DeskPlane: its
+    keypoints followed from a reference frame fix the plane's tilt); until that decides, results say
+    `ambiguous`, and once it has, the desk's fit is the frame's measurement. False: never.
     """
 
     def __init__(self, anchors: list[AnchorSpec], camera: Camera, filter: bool = True, *, roi: bool = True,
@@ -109,7 +73,8 @@ class AnchorTracker:
                  branch_switch: float = 6.0, smear_px: float = 10.0, smear_sharpness: float = 0.15,
                  cover_fraction: float = 0.2, cover_weight: float = 0.1, refit_weight: float = 0.3,
                  new_anchor_gate: float = 0.5, unblur_px: float | None = 2.0, lone_end_margin: float = 0.1,
-                 cover_relax_s: float = 0.2, hold_sigmas: float = 2.0, **filter_params):
+                 cover_relax_s: float = 0.2, hold_sigmas: float = 2.0, desk: bool = True,
+                 desk_ambiguous_px: float = 1.0, **filter_params):
         if not anchors:
             raise ValueError("AnchorTracker needs at least one anchor (the session's anchors list is empty)")
         self.anchors = list(anchors)
@@ -146,6 +111,8 @@ class AnchorTracker:
         self.outlier_px = float(outlier_px)
         self.branch_decay = float(branch_decay)
         self.branch_switch = float(branch_switch)
+        self.desk = DeskPlane(camera) if desk else None
+        self.desk_ambiguous_px = float(desk_ambiguous_px)
         self.reset()
 
     def reset(self) -> None:
@@ -165,7 +132,10 @@ class AnchorTracker:
         self._state_sigma = float("inf")   # the best measurement noise (radians) the filter's state rests on
         self.tracked_keys: set[tuple[int, int]] = set()
         self.trusted: set[int] = set()   # anchors that have carried (or agreed with) the pose this session
+        self.ambiguous = False   # the last frame's result was `ambiguous` (AnchorResult)
         self._projections: dict = {}     # this frame's _project_world results
+        if getattr(self, "desk", None) is not None:
+            self.desk.reset()
 
     def _other_branch_wins(self, obs: list[Observation], sol) -> bool:
         """Accumulate evidence between the two IPPE branches when a single planar anchor carries the pose.
@@ -279,8 +249,9 @@ class AnchorTracker:
             sol = self._unstretch(obs, sol)
         self.frame += 1
         res = AnchorResult()
+        desk = self._desk_update(gray, t, obs, sol)
         if sol is not None:
-            raw = sol.world_from_camera
+            raw = sol.world_from_camera if desk is None or not desk.decided else invert(desk.camera_from_world)
             depth = float(median((sol.world @ sol.camera_from_world[:3, :3].T + sol.camera_from_world[:3, 3])[:, 2]))
             # The measurement's noise in radians: pixel noise (the residual corrected for the 6 pose
             # parameters, at least 0.1 px) over the points' extent, times the lever f/extent that makes
@@ -302,6 +273,11 @@ class AnchorTracker:
             # a pose on one square's four corners (a lone marker) shows the orbit mode about their centre
             # far worse than the rest: the filter gives that mode its own, lower gain (filter.py)
             centre = np.mean(sol.world, axis=0) if n <= 4 else None
+            if desk is not None and desk.decided:
+                # the desk's keypoints hold the tilt the corners cannot: the measurement is as good as its fit
+                sigma, centre = max(desk.sigma, 1e-4), None
+            res.ambiguous = desk is not None and not desk.decided or (desk is None and self._desk_undecided())
+            res.desk = desk is not None and desk.decided
             filt = self.filter.update(raw, t, depth, sigma, weight=weight, centre=centre)
             filt = self._hold_to_corners(filt, raw, sol.world, px_sigma / max(weight, 1e-3))
             # (a restart leaves the state on this measurement alone; a down-weighted one counts as noisier)
@@ -323,8 +299,29 @@ class AnchorTracker:
         else:
             self.tracked_keys = set()
         res.rejected = rejected
+        self.ambiguous = res.ambiguous
         res.ms = (time.perf_counter() - t0) * 1000.0
         return res
+
+    def _desk_update(self, gray, t: float, obs: list[Observation], sol):
+        """The desk's fit (`desk.DeskPlane.update`) when a lone square marker carries the pose and its two IPPE
+        poses both fit its corners within `desk_ambiguous_px` RMS (or the desk is followed already); None
+        otherwise (the desk is then forgotten when no lone marker is seen)."""
+        if self.desk is None:
+            return None
+        lone = (sol is not None and len(obs) == 1 and len(sol.world) == 4 and len(sol.branches) == 2
+                and self.models[obs[0].anchor].anchor_kind.single_square)
+        if not lone:
+            self.desk.reset()
+            return None
+        if not self.desk.active:
+            rms = [float(np.sqrt(np.mean(r ** 2))) for _, r in sol.branches]
+            if max(rms) > self.desk_ambiguous_px:
+                return None
+        return self.desk.update(gray, t, sol.world, sol.img, [cfw for cfw, _ in sol.branches])
+
+    def _desk_undecided(self) -> bool:
+        return self.desk is not None and self.desk.active and not self.desk.decided
 
     def _hold_to_corners(self, filt: np.ndarray, raw: np.ndarray, world: np.ndarray, px_sigma: float) -> np.ndarray:
         """The filtered pose `filt` (world_from_camera), corrected just enough that the anchor points it rests
@@ -341,22 +338,7 @@ class AnchorTracker:
         the corners cannot see (a lone marker's tilt) stays removed. The filter's own state is left as it is."""
         if not self.filter_enabled or self.hold_sigmas <= 0 or len(world) < 3:
             return filt
-        tau = self.hold_sigmas * px_sigma
-        target = project_pixels(self.camera, invert(raw), world)
-        cfw = invert(filt)
-        for _ in range(2):
-            now = project_pixels(self.camera, cfw, world)
-            r = target - now
-            dev = float(row_norms(r).max())
-            if not dev > 1.02 * tau:
-                break
-            depth = max(float(median((world @ cfw[:3, :3].T + cfw[:3, 3])[:, 2])), 1e-3)
-            J = _pose_jacobian(self.camera, cfw, world, now, depth)
-            U, S, Vt = np.linalg.svd(J, full_matrices=False)
-            keep = S >= self.hold_rank_ratio * S[0]
-            delta = Vt[keep].T @ ((U[:, keep].T @ ((1.0 - tau / dev) * r.ravel())) / S[keep])
-            cfw = _perturb(cfw, delta, depth)
-        return invert(cfw)
+        return hold_to_corners(self.camera, filt, raw, world, self.hold_sigmas * px_sigma, self.hold_rank_ratio)
 
     def _unstretch(self, obs: list[Observation], sol):
         """The solution refitted together with motion blur's stretch of the markers (blur.py), when five or
@@ -530,30 +512,8 @@ class AnchorTracker:
         return out, set()
 
     def _refit_covered(self, gray, model: AnchorModel, ids, quads, bits: int, pred_cfw: np.ndarray):
-        """Corners (M,4,2) of partly covered markers `ids` (their detected corners `quads`), found again on
-        their edges where the predicted pose `pred_cfw` puts them (shifted onto the detection), or None.
-
-        A fingertip on a marker's border drags the detector's contour, and the edge fit started from it,
-        toward the finger; started from the prediction instead, the middle of each side (where the
-        edge fit samples) is mostly uncovered and the corners come out where the sides' lines meet. The
-        refit is kept only where at least three corners of each marker land within a pixel and a half (or
-        0.15 cell) of the detected ones: the prediction and the uncovered part of the detection agree."""
-        world = np.concatenate([model.to_world(model.markers[int(i)]) for i in ids])
-        start, z = project(self.camera, pred_cfw, world)
-        if np.any(z <= 0.01):
-            return None
-        start = start.reshape(-1, 4, 2)
-        # a lagging prediction is mostly shifted: move it onto the detection by the median offset of the
-        # four corners (one dragged corner cannot pull a median of four far)
-        start = start + np.median(quads - start, axis=1)[:, None, :]
-        cell = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).min(axis=1) / bits
-        refined, ok = refine_squares(gray, start, cell, self.camera, consensus_px=0.35, end_margin=self.lone_end_margin)
-        if not ok.all():
-            return None
-        near = np.linalg.norm(refined - quads, axis=2) <= np.maximum(1.5, 0.15 * cell)[:, None]
-        if (near.sum(axis=1) < 3).any():
-            return None
-        return refined
+        """`occlusion.refit_covered` with this tracker's camera and lone-marker edge margin."""
+        return refit_covered(self.camera, gray, model, ids, quads, bits, pred_cfw, self.lone_end_margin)
 
     def _detect_aruco(self, gray: np.ndarray, pred_cfw: np.ndarray | None, fast: bool = False) -> list[Observation]:
         """The ArUco anchors' observations: re-found on their edges where `pred_cfw` puts them, else detected
@@ -611,80 +571,3 @@ class AnchorTracker:
         """Plain-language reasons why the anchors are not (or badly) found in this image; [] when all is well."""
         from tracking.anchors.diagnose import diagnose
         return diagnose(self.anchors, self.camera, image)
-
-
-def _perturb(cfw: np.ndarray, delta: np.ndarray, depth: float) -> np.ndarray:
-    """camera_from_world moved by delta = (rotation vector, translation / depth) in the camera frame."""
-    out = cfw.copy()
-    dR = cv2.Rodrigues(np.asarray(delta[:3], np.float64).reshape(3, 1))[0]
-    out[:3, :3] = dR @ cfw[:3, :3]
-    out[:3, 3] = dR @ cfw[:3, 3] + np.asarray(delta[3:]) * depth
-    return out
-
-
-def _pose_jacobian(camera: Camera, cfw: np.ndarray, world: np.ndarray, px: np.ndarray, depth: float) -> np.ndarray:
-    """(2N, 6) pixels per unit of `_perturb`'s delta, by forward differences (1e-6)."""
-    J = np.empty((2 * len(world), 6))
-    for k in range(6):
-        d = np.zeros(6)
-        d[k] = 1e-6
-        J[:, k] = ((project_pixels(camera, _perturb(cfw, d, depth), world) - px) / 1e-6).ravel()
-    return J
-
-
-# ----------------------------------------------------------------------------------------------------
-class _Plain:
-    """Cached detectors for plain_opencv_pose."""
-
-    def __init__(self, anchors, camera):
-        self.models = build_models(list(anchors))
-        params = detector_parameters()
-        self.det = {}
-        for m in self.models:
-            if m.anchor_kind.detector != "qr" and m.spec.dictionary_id not in self.det:
-                self.det[m.spec.dictionary_id] = cv2.aruco.ArucoDetector(aruco_dictionary(m.spec.dictionary), params)
-        self.qr = cv2.QRCodeDetector() if any(m.anchor_kind.detector == "qr" for m in self.models) else None
-
-
-_PLAIN_CACHE: dict = {}
-
-
-def plain_opencv_pose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarray) -> np.ndarray | None:
-    """The plain OpenCV way, the benchmark's baseline: world_from_camera (4x4) or None.
-
-    Per frame: ArucoDetector.detectMarkers with CORNER_REFINE_SUBPIX (QR codes: QRCodeDetector
-    detectAndDecodeMulti with matching text), every detected corner of every anchor into one
-    cv2.solvePnP (SOLVEPNP_ITERATIVE) with camera.K and camera.dist; no filtering, no outlier handling.
-    """
-    key = (id(anchors), id(camera))
-    plain = _PLAIN_CACHE.get(key)
-    if plain is None or plain.models[0].spec is not anchors[0]:
-        _PLAIN_CACHE.clear()
-        plain = _PLAIN_CACHE[key] = _Plain(anchors, camera)
-    gray = to_gray(image)
-    obj, img = [], []
-    for d, det in plain.det.items():
-        corners, ids, _ = det.detectMarkers(gray)
-        if ids is None:
-            continue
-        for c, mid in zip(corners, ids.ravel()):
-            for m in plain.models:
-                if m.anchor_kind.detector != "qr" and m.spec.dictionary_id == d and int(mid) in m.markers:
-                    obj.append(m.to_world(m.markers[int(mid)]))
-                    img.append(c.reshape(4, 2))
-    if plain.qr is not None:
-        ok, texts, points, _ = plain.qr.detectAndDecodeMulti(gray)
-        if ok:
-            for text, p in zip(texts, points):
-                for m in plain.models:
-                    if m.anchor_kind.detector == "qr" and m.spec.text == text:
-                        obj.append(m.to_world(square_corners(m.spec.length)))
-                        img.append(p.reshape(4, 2))
-    if not obj:
-        return None
-    obj = np.concatenate(obj).astype(np.float64)
-    img = np.concatenate(img).astype(np.float64)
-    ok, rvec, tvec = cv2.solvePnP(obj, img, camera.K, camera.dist)
-    if not ok:
-        return None
-    return invert(from_rvec_tvec(rvec, tvec))

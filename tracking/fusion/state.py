@@ -21,6 +21,7 @@ class TrackResult:
     markers: int
     inliers: int
     ms: float
+    ambiguous: bool = False   # the pose rests on a lone head-on marker the desk has not yet judged (issue 25.4)
 
 
 @dataclass

@@ -66,11 +66,12 @@ from tracking.fusion.keyframes import Keyframes
 from tracking.fusion.moving import MovingAnchors
 from tracking.fusion.output import Output
 from tracking.fusion.state import AnchorMemory, FrameState, TrackResult, TrackStatus
-from tracking.session import AnchorSpec
+from tracking.anchors.kinds import AnchorSpec
 from tracking.slam.features import FeatureExtractor, Features
 from tracking.slam.flow import relift
 from tracking.slam.frame_pose import MotionModel
 from tracking.slam.map import Map
+from tracking.slam.map_io import adopt
 from tracking.slam.mapping import LocalMapper
 
 
@@ -144,6 +145,17 @@ class Tracker:
 
     def __exit__(self, *exc):
         self.close()
+
+    def load_map(self, saved: Map) -> None:
+        """Start from a saved map (a scene file, tracking.slam.map_io): forget the motion, so the next
+        frames relocalise against every saved keyframe; new keyframes extend it."""
+        self.reset()
+        adopt(self.map, saved)
+
+    def export_map(self) -> Map:
+        """The map as it stands once queued keyframes are mapped (to save in a scene file)."""
+        self.wait_mapping()
+        return self.map
 
     def wait_mapping(self) -> None:
         """Block until queued keyframes are mapped (offline replay, tests)."""
@@ -504,7 +516,8 @@ class Tracker:
         st.lost = 0
         st.last_state = state
         self.flow.tracked(frame.gray)
-        return TrackResult(out, state, markers, inliers, frame.ms())
+        return TrackResult(out, state, markers, inliers, frame.ms(),
+                           ambiguous=state == "marker" and self.anchor_tracker.ambiguous)
 
     def _lost_frame(self, markers: int) -> TrackResult:
         """A frame without a pose."""
@@ -523,4 +536,4 @@ class Tracker:
             return self._lost_frame(int(ar.markers))
         self.status.lost = 0
         return TrackResult(np.asarray(ar.world_from_camera, float), "marker", int(ar.markers), int(ar.inliers),
-                           self.frame.ms())
+                           self.frame.ms(), ambiguous=ar.ambiguous)

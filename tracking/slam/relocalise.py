@@ -18,11 +18,13 @@ def relocalise(m: Map, feats: Features, K: np.ndarray, near: np.ndarray | None =
                min_inliers: int = 20, ratio: float = 0.8, max_hamming: int = 60) -> tuple[np.ndarray | None, int]:
     """(world_from_camera or None, inliers) from descriptor matching against keyframes' map points.
 
-    Keyframes nearest to `near` (the last known pose) are tried first; without it the newest.
+    Keyframes nearest to `near` (the last known pose) are tried first; without it (nothing tracked yet
+    this run: a map loaded from a scene file, tracking.slam.map_io) every keyframe's points are.
     """
     if len(feats) < min_inliers:
         return None, 0
-    kfs = m.nearest_keyframes(near, max_keyframes) if near is not None else m.recent_keyframes(max_keyframes)
+    with m.lock:
+        kfs = m.nearest_keyframes(near, max_keyframes) if near is not None else list(m.keyframes.values())
     if not kfs:
         return None, 0
     # the union of map points these keyframes see, with their current positions and descriptors

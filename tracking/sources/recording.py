@@ -1,6 +1,6 @@
 """Recording folders (`arapp-recording/1`, spec `file:FOLDER` or the folder's path): frames at the
 timestamps of frames.csv, checked against the video, with their depth when the recording has a depth
-stream (tracking.depth_stream)."""
+stream (tracking.recording.depth_stream)."""
 
 from __future__ import annotations
 
@@ -14,9 +14,9 @@ from typing import Iterator
 import cv2
 import numpy as np
 
-from tracking import depth_stream
+from tracking.recording import depth_stream
 from tracking.errors import SessionError, SourceError
-from tracking.session import Session, load_session
+from tracking.recording.schema import Session, load_session
 
 from .base import Frame, Source, SourceWarning, _as_bgr, _open_capture, _probe_first_frame
 
@@ -135,7 +135,7 @@ class RecordingSource(Source):
 
     def _open_depth(self) -> depth_stream.DepthStream | None:
         """The depth stream session.json declares (checked), or None. The session reader
-        (tracking.session) ignores the block, so it is read here from the file itself."""
+        (tracking.recording.schema) ignores the block, so it is read here from the file itself."""
         path = self.folder / "session.json"
         data = json.loads(path.read_text(encoding="utf-8"))  # load_session has read it already: valid JSON
         spec = depth_stream.parse_block(data.get("depth"), self.folder, str(path))

@@ -12,18 +12,22 @@ import json
 from pathlib import Path
 from typing import Callable
 
-from tracking.session import Session
+from tracking.recording.schema import Session
 
 __all__ = ["synthesize", "scene_from_arg"]
 
 
 def scene_from_arg(arg: str):
     """A Scene from a preset name or a scene JSON file path."""
-    from tracking.synth.presets import EXTRA_TUNING, HELD, OCCLUSION, PRESETS, preset
+    # the scene tables: only when asked (keeps `import tracking.synth` light)
+    from tracking.synth.presets import EXTRA_TUNING, HEADON, HELD, OCCLUSION, PRESETS, preset
+    from tracking.synth.revisits import revisit_by_name
     from tracking.synth.scene import load_scene, parse_scene
 
-    if arg in PRESETS or arg in EXTRA_TUNING or arg in HELD or arg in OCCLUSION:
+    if arg in PRESETS or arg in EXTRA_TUNING or arg in HELD or arg in OCCLUSION or arg in HEADON:
         return parse_scene(preset(arg), f"preset {arg}")
+    if (revisit := revisit_by_name(arg)) is not None:   # scene revisits (tracking.synth.revisits)
+        return parse_scene(revisit, f"revisit scene {arg}")
     if arg.endswith(".json") or Path(arg).exists():
         return load_scene(arg)
     return parse_scene(preset(arg))  # raises the "no preset" error listing the presets
@@ -39,8 +43,8 @@ def synthesize(scene, out: str | Path, force: bool = False, max_frames: int | No
     depth/ (the simulated depth camera), occlusion/ (ground-truth masks) and occlusion.json
     (tracking.synth.occlusion).
     """
-    from tracking.recorder import RecordingWriter
-    from tracking.synth.held import make_renderer
+    from tracking.recording.writer import RecordingWriter  # the writer and the renderer (scipy, the scene code)
+    from tracking.synth.held import make_renderer  # load only when a recording is made, not for `arapp --help`
 
     if getattr(scene, "occlusion", None):
         from tracking.synth.occlusion import OcclusionRenderer, write_extras, write_mask

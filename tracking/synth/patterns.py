@@ -17,7 +17,7 @@ import numpy as np
 
 from tracking.anchors.model import charuco_board
 from tracking.errors import SessionError
-from tracking.session import AnchorSpec
+from tracking.anchors.kinds import AnchorSpec
 
 
 @dataclass

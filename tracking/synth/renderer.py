@@ -13,6 +13,8 @@ averaged down with INTER_AREA, which keeps OpenCV's pixel-centre convention
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
@@ -24,9 +26,11 @@ from tracking.synth.camera_effects import (AutoExposure, chroma_subsample_422, d
                                            white_balance_gains)
 from tracking.synth.hand import hand_polygons, smooth_presence
 from tracking.synth.patterns import pattern_for
-from tracking.synth.scene import Scene
 from tracking.synth.texture import make_desk_texture
 from tracking.synth.trajectory import make_trajectory
+
+if TYPE_CHECKING:  # annotations only: scene.py imports held.py, which imports this module
+    from tracking.synth.scene import Scene
 
 PAPER_BGR = np.array([228.0, 232.0, 234.0], np.float32)
 INK_BGR = np.array([26.0, 24.0, 24.0], np.float32)
@@ -93,6 +97,8 @@ class DeskRenderer:
             # Desk (x, y) -> anchor (x, y): the in-plane part of anchor_from_desk.
             A = invert(a.world_from_anchor) @ self.world_from_desk
             self.patterns.append((pattern_for(a), A[:2, [0, 1, 3]].astype(np.float64)))
+        # the anchors printed on the desk (none when the scene has them taken away: `desk.anchors_shown`)
+        self.printed = self.patterns if scene.anchors_shown else []
         self.centre = c
         self.pose_desk = make_trajectory(scene.trajectory, scene.duration, scene.seed)
         self.rng = np.random.default_rng(scene.seed + 101)
@@ -142,7 +148,7 @@ class DeskRenderer:
                         borderValue=FLOOR_BGR.tolist()).astype(np.float32)
         step = 4  # find each anchor's paper on a coarse grid first, then evaluate cells only around it
         H, W = ok.shape
-        for pat, A in self.patterns:
+        for pat, A in self.printed:
             # desk (x, y) -> print (p, q): affine, so rays -> (p, q) is one homography too
             to_print = np.array([[pat.sx, 0.0, -pat.origin[0] * pat.sx], [0.0, pat.sy, -pat.origin[1] * pat.sy],
                                  [0.0, 0.0, 1.0]]) @ np.vstack([A, [0.0, 0.0, 1.0]]) @ Hd
@@ -167,11 +173,12 @@ class DeskRenderer:
         # Soft desk lamp: brighter near one side, in desk coordinates so it moves with the scene:
         # 0.88 + 0.2 exp(-|(x, y) - lamp|^2 / 0.5), the offset scaled by 1/sqrt(0.5) by one more homography.
         k = 1.0 / np.sqrt(0.5)
-        to_lamp = np.array([[k, 0.0, -k * (self.centre[0] + 0.3)], [0.0, k, -k * (self.centre[1] + 0.2)],
+        lx, ly, strength, ambient = self.scene.lamp
+        to_lamp = np.array([[k, 0.0, -k * (self.centre[0] + lx)], [0.0, k, -k * (self.centre[1] + ly)],
                             [0.0, 0.0, 1.0]])
         d = _apply_homography(rays, to_lamp @ Hd)
         r2 = cv2.transform(d * d, np.ones((1, 2)))
-        lamp = cv2.exp(-r2) * np.float32(0.2) + np.float32(0.88)
+        lamp = cv2.exp(-r2) * np.float32(strength) + np.float32(ambient)
         if not all_ok:
             lamp[~ok] = 1.0
         img *= lamp[..., None]
@@ -225,7 +232,7 @@ class DeskRenderer:
                         borderValue=FLOOR_BGR.tolist()).astype(np.float32)
         step = 4  # find each anchor's paper on a coarse grid first, then evaluate cells only around it
         H, W = valid.shape
-        for pat, A in self.patterns:
+        for pat, A in self.printed:
             def paper_and_value(rs, cs):
                 xd, yd = x[rs, cs].astype(np.float64), y[rs, cs].astype(np.float64)
                 p, q = pat.print_coords(A[0, 0] * xd + A[0, 1] * yd + A[0, 2], A[1, 0] * xd + A[1, 1] * yd + A[1, 2])
@@ -244,7 +251,8 @@ class DeskRenderer:
             sub[paper & ~ink] = PAPER_BGR
             sub[ink] = INK_BGR
         # Soft desk lamp: brighter near one side, in desk coordinates so it moves with the scene.
-        lamp = 0.88 + 0.2 * np.exp(-((x - self.centre[0] - 0.3) ** 2 + (y - self.centre[1] - 0.2) ** 2) / 0.5)
+        lx, ly, strength, ambient = self.scene.lamp
+        lamp = ambient + strength * np.exp(-((x - self.centre[0] - lx) ** 2 + (y - self.centre[1] - ly) ** 2) / 0.5)
         img *= np.where(valid, lamp, 1.0)[..., None]
         return img
 

@@ -6,7 +6,11 @@ Scene JSON (all keys but `anchors` and `trajectory` optional; metres, seconds, d
      "camera": {"width": 640, "height": 480, "hfov_deg": 62, "dist": [k1, k2, p1, p2, k3]}
                or {"width": ..., "height": ..., "K": [[...]], "dist": [...]},
      "anchors": [ ...exactly as in session.json... ],
-     "desk": {"size": [1.4, 1.0], "ppm": 2000, "seed": 3, "style": "desk", "bed" or "tiles"},
+     "desk": {"size": [1.4, 1.0], "ppm": 2000, "seed": 3, "style": "desk", "bed" or "tiles",
+              "anchors_shown": true,                 (false: the anchors are taken off the desk; they
+                                                     still define the world frame of the ground truth)
+              "lamp": {"at": [0.3, 0.2], "strength": 0.2, "ambient": 0.88}},   (the desk lamp: brightness
+                                                     ambient + strength exp(-|p - centre - at|^2 / 0.5))
      "trajectory": {"kind": "orbit", ...}            (see tracking.synth.trajectory),
      "effects": {"noise": 2.0, "motion_blur": 0.0, "blur_samples": 7,
                  "exposure": {"amplitude": 0.2, "period": 2.0},
@@ -40,11 +44,14 @@ from tracking.camera import Camera
 from tracking.errors import CalibrationError, SessionError
 from tracking.jsonfile import read_json
 from tracking.poses import invert
-from tracking.session import AnchorSpec, parse_anchors
+from tracking.anchors.kinds import AnchorSpec
+from tracking.recording.schema import parse_anchors
+from tracking.synth.held import check_held
 from tracking.synth.patterns import pattern_for
 from tracking.synth.texture import STYLES
 from tracking.synth.trajectory import make_trajectory
 
+DEFAULT_LAMP = (0.3, 0.2, 0.2, 0.88)   # the desk lamp: at (x, y) m from the desk centre, strength, ambient
 DEFAULT_EFFECTS = {
     "noise": 0.0,  # sensor noise standard deviation at mid-grey, 8-bit levels (simple model; see "sensor")
     "motion_blur": 0.0,  # exposure time as a fraction of the frame interval (0 = sharp)
@@ -88,6 +95,8 @@ class Scene:
     """a card held before the camera (tracking.synth.held): the desk is the card, moving in a room"""
     occlusion: dict | None = None
     """a hand or object passing before a virtual model, with depth and masks (tracking.synth.occlusion)"""
+    anchors_shown: bool = True   # false: the desk without its anchors (a revisit with the marker removed)
+    lamp: tuple = DEFAULT_LAMP   # (x, y from the desk centre m, strength, ambient): the desk lamp
 
     @property
     def frame_count(self) -> int:
@@ -121,7 +130,10 @@ class Scene:
             "name": self.name, "seed": self.seed, "fps": self.fps, "duration": self.duration,
             "camera": self.camera.to_dict(), "anchors": self.anchor_blocks,
             "desk": {"size": list(self.desk_size), "ppm": self.desk_ppm, "seed": self.desk_seed,
-                     "style": self.desk_style},
+                     "style": self.desk_style, **({} if self.anchors_shown else {"anchors_shown": False}),
+                     **({} if self.lamp == DEFAULT_LAMP else {"lamp": {"at": list(self.lamp[:2]),
+                                                                       "strength": self.lamp[2],
+                                                                       "ambient": self.lamp[3]}})},
             "trajectory": self.trajectory, "effects": self.effects,
             "video": {"fourcc": self.fourcc, "quality": self.quality}, "supersample": self.supersample,
             **({"held": self.held} if self.held else {}),
@@ -209,6 +221,7 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
         desk_seed=int(desk.get("seed", data.get("seed", 0))), desk_style=style,
         effects=effects, fourcc=str(video.get("fourcc", "MJPG")), quality=int(video.get("quality", 90)),
         supersample=ss, held=data.get("held"), occlusion=data.get("occlusion"),
+        anchors_shown=_shown(desk, f"{where}.desk.anchors_shown"), lamp=_lamp(desk.get("lamp"), f"{where}.desk.lamp"),
     )
     if scene.occlusion is not None:
         from tracking.synth.occlusion import check_occlusion
@@ -220,12 +233,30 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
                                "(effects.rolling_shutter and effects.motion_blur 0)")
         check_occlusion(scene.occlusion, f"{where}.occlusion")
     if scene.held is not None:
-        from tracking.synth.held import check_held
-
         check_held(scene.held, effects.get("rolling_shutter"), f"{where}.held")
 
     make_trajectory(scene.trajectory, scene.duration, scene.seed, f"{where}.trajectory")  # validate now
     return scene
+
+
+def _lamp(block, where: str) -> tuple:
+    if block is None:
+        return DEFAULT_LAMP
+    at = block.get("at", list(DEFAULT_LAMP[:2])) if isinstance(block, dict) else None
+    vals = [block.get("strength", DEFAULT_LAMP[2]), block.get("ambient", DEFAULT_LAMP[3])] if at is not None else []
+    if (at is None or set(block) - {"at", "strength", "ambient"} or not isinstance(at, list) or len(at) != 2
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in [*at, *vals])
+            or not 0 <= vals[0] <= 2 or not 0 < vals[1] <= 2):
+        raise SessionError(f"{where}: must be {{\"at\": [x, y] metres, \"strength\": 0..2, \"ambient\": 0..2}}, "
+                           f"got {block!r}")
+    return (float(at[0]), float(at[1]), float(vals[0]), float(vals[1]))
+
+
+def _shown(desk: dict, where: str) -> bool:
+    v = desk.get("anchors_shown", True)
+    if not isinstance(v, bool):
+        raise SessionError(f"{where}: must be true or false, got {v!r}")
+    return v
 
 
 _EFFECT_KEYS = {"auto_exposure": {"target", "speed", "initial_gain", "min_gain", "max_gain"},

@@ -24,10 +24,10 @@ from PySide6.QtWidgets import (
 )
 
 from arapp.exchange.meshes import file_filter
-from arapp.gui.compact_spin import CompactSpin
+from arapp.gui.panels.compact_spin import CompactSpin
 from arapp.app.session import OCCLUSION_CHOICES
-from arapp.pipeline import MODES
-from arapp.placement import Placement
+from arapp.engine.pipeline import MODES
+from arapp.geometry.placement import Placement
 
 # the mesh suffixes come from the one table of formats (arapp.exchange.meshes.FORMATS)
 MODEL_FILTER = f"Models (*.json {file_filter()});;NURBS models (*.json);;Meshes ({file_filter()})"
@@ -63,7 +63,7 @@ def _spin(lo: float, hi: float, step: float, decimals: int, suffix: str = "",
 class ModelPanel(QWidget):
     """Widgets only; the main window loads models and talks to the pipeline.
 
-    Signals: model_chosen(path), placement_changed(arapp.placement.Placement),
+    Signals: model_chosen(path), placement_changed(arapp.geometry.placement.Placement),
     mode_changed(str), occlusion_changed(str), point_selected(surface, i, j),
     point_edited(surface, i, j, (x, y, z), weight), print_requested().
     """

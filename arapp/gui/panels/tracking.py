@@ -20,7 +20,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 STATE_STYLE = {"marker": "color: #2a2; font-weight: bold", "slam": "color: #29c; font-weight: bold",
                "lost": "color: #c33; font-weight: bold"}
@@ -121,7 +121,7 @@ def skipped_text(marks: list, cumulative: int, now: float) -> str:
 
 
 class AnchorsDialog(QDialog):
-    """Edits the anchors list as session.json writes it (JSON), validated by tracking.session.parse_anchors."""
+    """Edits the anchors list as session.json writes it (JSON), validated by tracking.recording.schema.parse_anchors."""
 
     def __init__(self, anchors_json: list, parent=None):
         super().__init__(parent)

@@ -16,7 +16,9 @@ from ..export import clean_mesh, fit_on_bed
 from ..profile import load_profile
 from .contours import layer_planes, loops_to_region, slice_loops
 from .perimeters import fill_area, solid_areas, split_fill
-from .planner import LayerToolpaths, ToolPath, plan_layer, skirt_loops
+from ..gcode import write_gcode
+from ..toolpath import LayerToolpaths, ToolPath
+from .planner import plan_layer, skirt_loops
 from .settings import INFILL_PATTERNS, SliceSettings
 
 __all__ = ["SliceSettings", "SliceResult", "SliceCancelled", "slice_mesh", "INFILL_PATTERNS",
@@ -67,8 +69,6 @@ def slice_mesh(mesh_mm, settings: SliceSettings | None = None, profile=None, pro
     stops the work with SliceCancelled once set. A model that does not fit
     the bed raises ModelDoesNotFitError unless settings.scale_to_fit.
     """
-    from ..gcode import write_gcode  # here, not at the top: gcode imports .slicer.planner (an import cycle)
-
     settings = settings or SliceSettings()
     profile = profile or load_profile()
     settings.check_for(profile)  # ranges tied to this printer's nozzle, height and heaters

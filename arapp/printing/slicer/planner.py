@@ -12,41 +12,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
+from ..toolpath import LayerToolpaths, ToolPath
 from .infill import zigzag
 from .perimeters import island_walls, polygon_parts
-
-# Feature kinds, in G-code `;TYPE:` names.
-KIND_TYPES = {
-    "skirt": "SKIRT",
-    "external_perimeter": "EXTERNAL_PERIMETER",
-    "perimeter": "PERIMETER",
-    "solid_infill": "SOLID_INFILL",
-    "sparse_infill": "SPARSE_INFILL",
-}
-
-
-@dataclass
-class ToolPath:
-    """One continuous extrusion: `points` (N, 2) in mm at the layer's z; closed loops repeat the first point."""
-
-    kind: str
-    points: np.ndarray
-    width: float
-
-    @property
-    def length(self) -> float:
-        return float(np.linalg.norm(np.diff(self.points, axis=0), axis=1).sum())
-
-
-@dataclass
-class LayerToolpaths:
-    """The extrusions of one layer in print order; `z` is the layer's top (nozzle height), `height` its thickness."""
-
-    index: int
-    z: float
-    height: float
-    paths: list[ToolPath] = field(default_factory=list)
-
 
 def _start_loop_near(loop: np.ndarray, pos: np.ndarray) -> np.ndarray:
     """A closed loop (first point repeated last) restarted at its vertex nearest `pos`."""

@@ -1,0 +1,79 @@
+"""Why a replay or a recording shows none of its anchors, and what it shows instead (issues 25, 26.1).
+
+`untracked_lines` samples a few frames spread over the video, runs anchor discovery on them
+(tracking/anchors/discover.py: every dictionary family, both polarities, QR codes) and returns two
+lines for the terminal: why nothing was tracked (tracking/anchors/diagnose.why_line) and, when
+discovery found an anchor, the suggestion with the `--anchors` JSON to use. `arapp replay` calls it
+when a replay tracked nothing, `arapp record` when its recording shows none of its anchors.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tracking.anchors.diagnose import suggestion_line, why_line
+from tracking.anchors.discover import Discovery
+
+from arapp.engine.input_source import open_input
+
+SAMPLED_FRAMES = 8   # frames spread over the video: a board held up for a second of a minute is still met
+ENOUGH_FRAMES = 3    # once something is found in this many, the other sampled frames are not looked at
+
+
+def sample_frames(video: str | Path, count: int = SAMPLED_FRAMES) -> list[np.ndarray]:
+    """Up to `count` gray frames spread evenly over a video file (fewer when it has fewer or ends early)."""
+    cap = cv2.VideoCapture(str(video))
+    try:
+        n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        picks = sorted({int((k + 0.5) * n / count) for k in range(count)}) if n > 0 else []
+        out = []
+        for i in picks:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, i)
+            ok, frame = cap.read()
+            if ok:
+                out.append(frame if frame.ndim == 2 else cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY))
+        return out
+    finally:
+        cap.release()
+
+
+def untracked_lines(video: str | Path, anchors, default_anchors: bool = False, camera=None) -> list[str]:
+    """[why, suggestion] for a video in which `anchors` (AnchorSpecs) gave no pose; [] when they do give one
+    in the sampled frames (only checked when `camera` is given: a recording, not a finished replay)."""
+    frames = sample_frames(video)
+    if camera is not None and _anchors_give_a_pose(anchors, camera, frames):
+        return []
+    found = Discovery()
+    for k, g in enumerate(frames):
+        if k >= ENOUGH_FRAMES and found.suggestions():
+            break   # something was found in frames across the video: the rest would only repeat it
+        found.look_all(g)
+    lines = [why_line(anchors, found, default_anchors)]
+    suggestions = found.suggestions()
+    if suggestions:
+        lines.append(suggestion_line(suggestions[0]))
+    return lines
+
+
+def _anchors_give_a_pose(anchors, camera, frames) -> bool:
+    from tracking.anchors.tracker import AnchorTracker   # the tracker is heavy; only a recording's check needs it
+
+    tracker = AnchorTracker(anchors, camera, filter=False)
+    for k, g in enumerate(frames):
+        if g.shape == (camera.height, camera.width) and tracker.process(g, float(k)).world_from_camera is not None:
+            return True
+    return False
+
+
+def untracked_lines_for(recording: str | Path, calibration: str | None = None, anchors_file: str | None = None
+                        ) -> list[str]:
+    """untracked_lines for what `arapp replay` was given: a recording folder or a plain video, with the anchors
+    it tracked (arapp.engine.input_source.open_input: `anchors_file`, else a recording's own, else the default)."""
+    with open_input(recording, calibration=calibration, anchors=anchors_file, default_anchor_note=False) as opened:
+        session = getattr(opened.source, "session", None)
+        anchors, default = opened.anchors, opened.default_anchors
+    video = session.video_path if session is not None else Path(recording)
+    return untracked_lines(video, anchors, default_anchors=default)

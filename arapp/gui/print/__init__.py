@@ -1,0 +1,1 @@
+"""Printing in the window: the print dialog and panel, Printer set-up, the bed anchor, the temperature graph."""

@@ -1,0 +1,82 @@
+"""A small marker seen nearly head-on (issue 25.4, the planar ambiguity): the desk around it decides its tilt.
+
+Recording: tracking.synth.presets.HEADON `test_headon` (a 3 cm marker at ~0.7 m on a textured desk, the camera
+held by hand 4-7 degrees off the marker's normal, webcam effects), rendered on first use and cached in
+build/synth/ (tests/scenes.py `held_recording`). It was made from fresh seeds and never looked at while
+choosing the desk's parameters (those were chosen on tune_headon and tune_headon_b). Ground truth: the
+camera pose per frame from the generator, an oracle independent of the tracker. The goals (rotation error
+<= 2 degrees after the first second, jitter <= half of plain OpenCV's) are asserted as the issue states them;
+the position error is asserted near what is measured (2.0 % of the distance: the goal of 1 % is not met).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenes import held_recording
+from tracking.anchors import AnchorTracker
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+
+
+@pytest.fixture(scope="module")
+def headon():
+    return held_recording("test_headon")
+
+
+def _run(frames, session, **kw):
+    at = AnchorTracker(session.anchors, session.camera, **kw)
+    results = [at.process(img, t) for t, img, _ in frames]
+    return [r.world_from_camera for r in results], results
+
+
+@pytest.fixture(scope="module")
+def runs(headon):
+    frames, session = headon
+    return {"desk": _run(frames, session), "marker": _run(frames, session, desk=False)}
+
+
+def test_the_desk_settles_the_tilt_of_a_head_on_marker(headon, runs):
+    from bench_slam import headon_errors
+    from peers import PlainPeer
+
+    frames, session = headon
+    peer = PlainPeer(session.anchors, session.camera)
+    plain = headon_errors(frames, [peer.pose(img) for _, img, _ in frames])
+    desk = headon_errors(frames, runs["desk"][0])
+    marker = headon_errors(frames, runs["marker"][0])
+    # the recording shows the ambiguity: the marker's own pose flips or tilts by degrees, plain OpenCV's too
+    assert marker["rot_late_max"] > 5.0 and plain["rot_late_max"] > 5.0
+    assert desk["tracked"] == 1.0
+    assert desk["rot_late_max"] <= 2.0          # issue 25.4's goal (measured 1.3)
+    assert desk["pos_fraction"] <= 0.025        # measured 2.0 % (the goal, 1 %, is not met)
+    assert desk["jitter_m"] <= 0.5 * plain["jitter_m"]
+
+
+def test_undecided_at_first_decided_later(runs):
+    results = runs["desk"][1]
+    flags = [r.ambiguous for r in results]
+    assert flags[0], "a lone head-on marker's first frame cannot be decided yet"
+    assert not any(flags[45:]), "the desk has decided by 1.5 s"
+    assert all(r.desk for r in results[45:])
+    # the marker-only run never claims the desk decided
+    assert not any(r.desk for r in runs["marker"][1])
+
+
+def test_ambiguous_hint_shows_while_tracked_and_undecided(qtbot):
+    from arapp.app.guidance import ambiguous_hint
+    from arapp.gui.first_hour.welcome import LostHint
+
+    hint = LostHint(delay_s=1.0)
+    qtbot.addWidget(hint)
+    hint.update_state("marker", [], now=0.0, ambiguous=True)
+    assert not hint.isHidden() and hint.text() == ambiguous_hint()
+    assert "Tilt the camera" in hint.text()
+    hint.update_state("marker", [], now=0.1, ambiguous=False)
+    assert hint.isHidden()
+    hint.update_state("lost", [], now=0.2)
+    assert hint.isHidden()   # lost: the lost hint still waits its delay

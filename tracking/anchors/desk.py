@@ -1,0 +1,258 @@
+"""The textured surface around a lone marker as the judge of its tilt (issue 25.4, the planar ambiguity).
+
+A small marker seen nearly head-on has two poses that fit its four corners almost equally (IPPE's two
+minima, `pose.planar_solutions`), and even the better one is tilted by degrees with a tenth of a pixel of
+corner noise: the corners span too few pixels to show perspective. The desk the marker lies on spans the
+whole image, and it is the same plane. Its keypoints, followed by optical flow from a reference frame,
+move between two views by the homography that plane induces; that homography holds the camera's motion
+and, once the camera has moved sideways a little, the plane's normal: the tilt the marker cannot show.
+
+`DeskPlane.update` fits, by Levenberg-Marquardt on normalised image coordinates, the reference frame's pose
+and this frame's pose together to the marker's corners in both frames and to the desk points' transfer
+between them (every desk point lifted onto the marker's plane z = 0 from the reference view, and
+projected into this one). The fit starts from both IPPE branches; the tilt's standard deviation comes
+from the fit's Jacobian. The best-determined reference pose so far is kept, and this frame's pose is then
+fitted with the reference held there (the desk points are then a map on the marker's plane): its precision
+no longer falls when the camera comes back toward where the reference was taken. Until the tilt is known
+to `decide_deg` and the other minimum fits clearly worse, the result says undecided (the caller shows the
+marker's own pose and asks the user to tilt the camera).
+
+Poses are 4x4 camera_from_world (world = the marker's anchor world, metres); pixels are distorted image
+pixels as `camera` says.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from tracking.camera import Camera
+from tracking.poses import from_rvec_tvec, rotation_angle, to_rvec_tvec
+
+_LK = dict(winSize=(15, 15), maxLevel=2, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01))
+
+
+@dataclass
+class DeskFit:
+    """One frame's outcome: `camera_from_world` this frame's pose from the marker and the desk together,
+    `sigma` its tilt's standard deviation (radians), `decided` whether that settles the marker's pose
+    (tilt known to `decide_deg`, the other minimum excluded), `points` desk points used."""
+
+    camera_from_world: np.ndarray
+    sigma: float
+    decided: bool
+    points: int
+
+
+def _params(cfw: np.ndarray) -> np.ndarray:
+    r, t = to_rvec_tvec(cfw)
+    return np.concatenate([np.ravel(r), np.ravel(t)])
+
+
+def _pose(p: np.ndarray) -> np.ndarray:
+    return from_rvec_tvec(p[:3], p[3:6])
+
+
+def _rot(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return cv2.Rodrigues(np.asarray(p[:3], np.float64).reshape(3, 1))[0], np.asarray(p[3:6], float)
+
+
+def _project(R: np.ndarray, t: np.ndarray, X: np.ndarray) -> np.ndarray:
+    Xc = X @ R.T + t
+    return Xc[:, :2] / Xc[:, 2:3]
+
+
+def _lift(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """World points (N,3) on the plane z = 0 seen at normalised coordinates x (N,2) by camera (R, t)."""
+    c = -R.T @ t
+    d = np.column_stack([x, np.ones(len(x))]) @ R   # rows: R^T [x, y, 1]
+    lam = -c[2] / np.where(np.abs(d[:, 2]) > 1e-9, d[:, 2], 1e-9)
+    return c + lam[:, None] * d
+
+
+class DeskPlane:
+    """Keypoints of the surface a lone marker lies on, followed from a reference frame; see the module docstring.
+
+    camera: intrinsics of the images; max_points: desk keypoints seeded (goodFeaturesToTrack); min_points:
+    fewer followed points than this and the reference is taken anew; marker_px / desk_px: the pixel noise
+    taken for the marker's corners and for the desk points' flow; decide_deg: the tilt's standard deviation
+    (degrees) under which it counts as decided; exclude_chi2: how much worse (in squared standard deviations)
+    the other minimum must fit to be excluded."""
+
+    def __init__(self, camera: Camera, max_points: int = 250, min_points: int = 40, marker_px: float = 0.3,
+                 desk_px: float = 0.3, decide_deg: float = 1.0, exclude_chi2: float = 25.0):
+        self.camera = camera
+        self.max_points, self.min_points = int(max_points), int(min_points)
+        self.marker_px, self.desk_px = float(marker_px), float(desk_px)
+        self.decide = np.radians(decide_deg)
+        self.exclude_chi2 = float(exclude_chi2)
+        self.f = float(np.sqrt(camera.fx * camera.fy))
+        self.free_every = 5
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the reference frame, its points and what was decided."""
+        self._prev_gray: np.ndarray | None = None
+        self._prev_px: np.ndarray | None = None     # the desk points in the last frame (N,2 pixels)
+        self._ref_x: np.ndarray | None = None       # ... in the reference frame (N,2 normalised)
+        self._ref_marker: tuple | None = None       # (world corners (4,3), normalised corners (4,2))
+        self._ref_branches: list[np.ndarray] = []   # the reference frame's IPPE poses
+        self._ref_best: np.ndarray | None = None    # best-determined reference pose so far (params, 6)
+        self._ref_sigma = np.inf                    # its tilt's standard deviation, radians
+        self._last: np.ndarray | None = None        # last frame's fitted pose (params, 6)
+        self._excluded = False                      # the other minimum was seen to fit clearly worse
+        self._seeded = 0
+        self._ref_px: np.ndarray | None = None     # the desk points in the reference frame (pixels, as seen)
+        self._ref_deskewed = False                  # ... moved to the reference's centre-row time yet
+        self._prev_t: float | None = None
+        self._frames = 0                            # frames fitted since the reference was taken
+        self.decided = False
+
+    @property
+    def active(self) -> bool:
+        """Whether a reference frame is held (the desk is being followed)."""
+        return self._ref_x is not None
+
+    def _normalised(self, px: np.ndarray) -> np.ndarray:
+        return cv2.undistortPoints(np.asarray(px, np.float64).reshape(-1, 1, 2), self.camera.K,
+                                   self.camera.dist).reshape(-1, 2)
+
+    def _seed(self, gray: np.ndarray, t: float, world: np.ndarray, img: np.ndarray, branches: list[np.ndarray],
+              ref: np.ndarray | None, ref_sigma: float) -> None:
+        pts = cv2.goodFeaturesToTrack(gray, self.max_points, 0.01, 12, blockSize=7)
+        if pts is None or len(pts) < self.min_points:
+            self._ref_x = None
+            return
+        pts = pts.reshape(-1, 2).astype(np.float32)
+        self._prev_gray, self._prev_px, self._prev_t = gray, pts, t
+        self._ref_px, self._ref_deskewed, self._frames = pts, self.camera.readout <= 0, 0
+        self._ref_x = self._normalised(pts)
+        self._ref_marker = (np.asarray(world, float), self._normalised(img))
+        self._ref_branches = list(branches)
+        self._ref_best = None if ref is None else _params(ref)
+        self._ref_sigma = ref_sigma if ref is not None else np.inf
+        self._seeded = len(pts)
+
+    def _follow(self, gray: np.ndarray, t: float) -> np.ndarray:
+        """The desk points followed into `gray` (forward-backward checked); keeps only those. Their pixels, moved
+        to the frame's centre-row time for a rolling shutter (`camera.readout`): each point by its own image
+        velocity since the last frame times its row's offset (the reference frame's points likewise, with the
+        velocity to the frame after it, once)."""
+        nxt, st, _ = cv2.calcOpticalFlowPyrLK(self._prev_gray, gray, self._prev_px, None, **_LK)
+        back, st2, _ = cv2.calcOpticalFlowPyrLK(gray, self._prev_gray, nxt, None, **_LK)
+        ok = (st.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm(back - self._prev_px, axis=1) < 0.5)
+        h, w = gray.shape
+        ok &= (nxt[:, 0] >= 0) & (nxt[:, 0] < w) & (nxt[:, 1] >= 0) & (nxt[:, 1] < h)
+        prev = self._prev_px[ok]
+        self._prev_px, self._ref_x, self._ref_px = nxt[ok], self._ref_x[ok], self._ref_px[ok]
+        self._prev_gray = gray
+        dt = t - self._prev_t if self._prev_t is not None else 0.0
+        self._prev_t = t
+        if self.camera.readout <= 0 or not 0 < dt <= 0.2:
+            return self._prev_px
+        vel = (self._prev_px - prev) / dt
+        if not self._ref_deskewed:
+            ref = self._ref_px - vel * self.camera.row_offsets(self._ref_px[:, 1])[:, None]
+            self._ref_x, self._ref_deskewed = self._normalised(ref), True
+        return self._prev_px - vel * self.camera.row_offsets(self._prev_px[:, 1])[:, None]
+
+    def _residuals(self, p: np.ndarray, marker_c, xr: np.ndarray, xc: np.ndarray, fixed_ref: np.ndarray | None):
+        """Normalised residuals (in standard deviations) of the joint fit: p = [reference pose, this pose]
+        (or this pose alone with the reference held at `fixed_ref`)."""
+        pr = fixed_ref if fixed_ref is not None else p[:6]
+        pc = p[-6:]
+        Rr, tr = _rot(pr)
+        Rc, tc = _rot(pc)
+        wc, mc = marker_c
+        out = [((_project(Rc, tc, wc) - mc) * (self.f / self.marker_px)).ravel()]
+        if fixed_ref is None:
+            wr, mr = self._ref_marker
+            out.append(((_project(Rr, tr, wr) - mr) * (self.f / self.marker_px)).ravel())
+        X = _lift(Rr, tr, xr)
+        out.append(((_project(Rc, tc, X) - xc) * (self.f / self.desk_px)).ravel())
+        return np.concatenate(out)
+
+    def _fit(self, start: np.ndarray, marker_c, xr, xc, fixed_ref=None):
+        """(params, cost in squared standard deviations, tilt sigma of this pose (rad), of the reference's)."""
+        try:
+            r = least_squares(self._residuals, start, method="lm", args=(marker_c, xr, xc, fixed_ref),
+                              x_scale="jac", max_nfev=60)
+        except (ValueError, np.linalg.LinAlgError):
+            return None
+        try:
+            cov = np.linalg.inv(r.jac.T @ r.jac)
+        except np.linalg.LinAlgError:
+            return None
+        sig = lambda k: float(np.sqrt(max(np.linalg.eigvalsh(cov[k:k + 3, k:k + 3]).max(), 0.0)))  # noqa: E731
+        n = len(start)
+        return r.x, 2.0 * float(r.cost), sig(n - 6), (sig(0) if n == 12 else np.inf)
+
+    def update(self, gray: np.ndarray, t: float, world: np.ndarray, img: np.ndarray,
+               branches: list[np.ndarray]) -> DeskFit | None:
+        """One frame (grey image `gray` taken at `t` seconds) with a lone marker: its corners `world` (4,3
+        metres) at `img` (4,2 pixels) and its IPPE poses `branches` (camera_from_world). None while there is
+        no fit yet (the first frame, too few desk points, a fit that failed)."""
+        if len(branches) == 0 or len(world) < 4:
+            self.reset()
+            return None
+        if not self.active or self._prev_gray is None or self._prev_gray.shape != gray.shape:
+            self._seed(gray, t, world, img, branches, None, np.inf)
+            return None
+        px = self._follow(gray, t)
+        if len(px) < max(self.min_points, self._seeded // 3):
+            ref = None if self._last is None else _pose(self._last)
+            sigma = self._ref_sigma if self.decided else np.inf
+            self._seed(gray, t, world, img, branches, ref, sigma)
+            return None
+        xc = self._normalised(px)
+        xr = self._ref_x
+        # the plane's transfer as one homography first: points off it (a tracking slip, an object on the desk) go
+        _, inl = cv2.findHomography(xr * self.f, xc * self.f, cv2.RANSAC, 2.0)
+        if inl is None or inl.sum() < self.min_points:
+            return None
+        inl = inl.ravel().astype(bool)
+        xr, xc = xr[inl], xc[inl]
+        marker_c = (np.asarray(world, float), self._normalised(img))
+        self._frames += 1
+        fits = []
+        if not self.decided or self._frames % self.free_every == 0:
+            # the joint fit with the reference pose free (every `free_every` frames once decided: it only
+            # improves the reference as the camera moves further)
+            fits = [f for f in (self._fit(s, marker_c, xr, xc) for s in self._starts(branches)) if f is not None]
+            fits.sort(key=lambda f: f[1])
+        if not fits and self._ref_best is None:
+            return None
+        best = fits[0] if fits else None
+        if best is not None and not self._excluded and len(fits) > 1:
+            other = next((f for f in fits[1:] if rotation_angle(_rot(f[0][6:])[0] @ _rot(best[0][6:])[0].T)
+                          > 3 * max(best[2], np.radians(0.3))), None)
+            # the other minimum fits clearly worse (or is no minimum: the fit from it came to this one)
+            self._excluded = (other is None or other[1] - best[1] > self.exclude_chi2) and best[2] < 2 * self.decide
+        elif best is not None and len(fits) == 1 and not self._excluded:
+            self._excluded = best[2] < 2 * self.decide and len(self._ref_branches) < 2
+        if best is not None and best[3] < self._ref_sigma:
+            self._ref_best, self._ref_sigma = best[0][:6].copy(), best[3]
+        start = best[0][6:] if self._last is None else self._last
+        held = self._fit(start, marker_c, xr, xc, fixed_ref=self._ref_best)
+        if held is None:
+            return None
+        self._last = held[0]
+        sigma = float(np.hypot(held[2], self._ref_sigma))
+        self.decided = self.decided or (self._excluded and sigma < self.decide)
+        return DeskFit(_pose(held[0]), sigma, self.decided, int(len(xr)))
+
+    def _starts(self, branches: list[np.ndarray]) -> list[np.ndarray]:
+        """Starting points [reference pose, this pose] of the joint fit: the last fit (once there is one) and,
+        until the other minimum is excluded, each reference branch paired with this frame's branch closest
+        to it in rotation."""
+        out = []
+        if self._ref_best is not None and self._last is not None:
+            out.append(np.concatenate([self._ref_best, self._last]))
+        if not self._excluded or not out:
+            for rb in self._ref_branches:
+                cb = min(branches, key=lambda b: rotation_angle(b[:3, :3] @ rb[:3, :3].T))
+                out.append(np.concatenate([_params(rb), _params(cb)]))
+        return out
