@@ -99,6 +99,7 @@ class Tracker:
         # the anchors' own filter smooths the marker-only frames before the map carries the pose
         self.anchor_tracker = AnchorTracker(anchors, camera, filter=cfg.filter, cover_fraction=cfg.cover_fraction,
                                             cover_weight=cfg.cover_weight, new_anchor_gate=cfg.new_anchor_gate)
+        self._desk = self.anchor_tracker.desk   # its desk judge, off while the anchors move in the room
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="anchors") if cfg.slam else None
         n_features = cfg.n_features
         if n_features is None:
@@ -129,6 +130,7 @@ class Tracker:
             self.mapper.wait_idle()
         self.map.clear()
         self.motion.reset()
+        self.anchor_tracker.desk = self._desk   # (back on if the anchors were seen to move: `_drop_map`)
         self.anchor_tracker.reset()
         self._fresh_state()
 
@@ -372,6 +374,12 @@ class Tracker:
         self.map.clear()
         self.keyframes.submissions = []
         self.flow.tracks = None
+        # nor may the anchors' desk judge (a lone marker's tilt from the keypoints around it, taken to lie on
+        # its plane: tracking.anchors.desk) follow the surroundings any longer: a wall behind a held card
+        # moves in the image as no point on the card does, and its fit pulls the pose centimetres off
+        if self.anchor_tracker.desk is not None:
+            self.anchor_tracker.desk.reset()
+            self.anchor_tracker.desk = None
 
     def _without_fit(self, ar, pred, markers: int) -> TrackResult:
         """Neither anchors nor the map gave a pose: flow from the last frame, else the partly covered
