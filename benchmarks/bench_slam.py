@@ -146,7 +146,8 @@ def _held_section(names: list[str]) -> list[str]:
     out = ["### Cards held before the camera (the anchors move in the room)", "",
            "Recordings `tracking.synth.presets.HELD`, rendered on first use into the recordings cache (tracking/synth/cache.py): a "
            "board or lone-marker card waved before a still webcam (slow drifts, two fast swings smeared past reading) "
-           "with a textured wall 0.8 m behind, and `*_both`: a hand-held camera moving too. Ground truth: the camera "
+           "with a textured wall 0.8 m behind, `*_both`: a hand-held camera moving too, and `*_rest`: both move, the board "
+           "card put down for 2.5 s between its swings. Ground truth: the camera "
            "in the card's frame. `plain`: PlainPeer on the same frames, same run. Goal (issue 25): frames placed >= "
            "plain, none more than 3 cm off. `moving from`: the frame the tracker saw the anchors move in the room "
            "(from then on the room's keypoints do not carry the pose).", "",

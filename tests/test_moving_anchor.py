@@ -46,8 +46,20 @@ def _run(name: str) -> dict:
     if name not in _RUNS:
         frames, session = held_recording(name)
         with Tracker(session.camera, session.anchors) as tr:
-            r = run_tracker(tr, frames)
+            seen: list[bool] = []
+
+            class Noting:   # the tracker, noting after each frame whether the anchors move
+                def process(self, img, t):
+                    res = tr.process(img, t)
+                    seen.append(tr.anchors_moving)
+                    return res
+
+                def catch_up(self):
+                    tr.catch_up()
+
+            r = run_tracker(Noting(), frames)
             r["moving"] = tr.anchors_moving
+            r["moving_from"] = seen.index(True) if True in seen else None
         r["plain"] = _plain_errors(frames, session)
         gt = np.array([f[2] for f in frames])
         # how far the card moves in the camera's view (the truth's camera position in the card's frame)
@@ -115,28 +127,54 @@ def test_held_board_card_is_followed(name):
     assert all(s in ("marker", "slam") for s, p in zip(r["states"], r["poses"]) if p is not None)
 
 
-@pytest.mark.xfail(strict=True, reason="not met yet (issue 25): on the lone-marker card arapp places fewer frames "
-                   "than plain OpenCV (it does not start on the smeared frames after a swing, where plain reads 2-8 cm "
-                   "off), and a lone marker's pose is too noisy for the background test (boards only), so the card is seen "
-                   "to move only by the map, after the first swing, which the still room's flow carries up to 21 cm off")
 @pytest.mark.parametrize("name", [n for n in HELD_TEST if "marker" in n])
 def test_held_marker_card_is_no_worse_than_plain(name):
     """A lone 6 cm marker card: its four corners hold the camera position to only 1-3 cm at 0.42 m (the
     plain peer's own median), so the goal here is the peer's: as many frames placed, and the worst frame
-    no further off than the peer's worst; the few points on a lone marker do not carry it across a swing."""
+    no further off than the peer's worst; the few points on a lone marker do not carry it across a swing.
+    The card is seen to move by the still background (pixels, no pose) while it drifts, before its first
+    swing, so the still room never carries it (measured on test_held_marker: moving from frame 30, 106
+    frames placed against plain's 105, worst 6.0 cm against 6.4 cm; the rule was chosen on
+    tune_held_marker, where it places 110 against 110 and is 8.1 cm off at worst against plain's 7.8)."""
     r = _run(name)
+    e, plain = r["errors"], r["plain"]
+    assert r["moving"], "the card moved in the room but the tracker did not notice"
+    # noticed before the first swing (the first frame plain OpenCV cannot read): the room's keypoints never
+    # carried the card across it
+    assert r["moving_from"] < int(np.flatnonzero(~np.isfinite(plain))[0]), r["moving_from"]
+    assert int(np.isfinite(e).sum()) >= int(np.isfinite(plain).sum()), (int(np.isfinite(e).sum()),
+                                                                         int(np.isfinite(plain).sum()))
+    assert float(np.nanmax(e)) <= float(np.nanmax(plain)), (float(np.nanmax(e)), float(np.nanmax(plain)))
+    # never placed from the still room: every placed frame is the marker's or the flow on it
+    assert all(s in ("marker", "slam") for s, p in zip(r["states"], r["poses"]) if p is not None)
+
+
+@pytest.mark.xfail(strict=True, reason="not met yet (issue 25): on test_held_rest the board starts drifting 0.6 s before "
+                   "its first swing while the hand-held camera moves, and the map's check needs two disagreeing checks "
+                   "10 frames apart: the swing comes first and the still room carries the card 3-14 cm off on 3 "
+                   "frames (the worst 6.5 or 13.8 cm from run to run) (tune_held_rest, drifting a second before its "
+                   "swing, is noticed in time)")
+def test_held_card_put_down_between_swings():
+    """Both move, and the board card is put down for 2.5 s between its swings while the camera goes on moving
+    (the map stays off once the card was seen to move: letting it back while the card rested placed the
+    second swing's smeared start 7 cm off): the goal of the board cards, as many frames as plain OpenCV and
+    none more than 3 cm off."""
+    r = _run("test_held_rest")
     e, plain = r["errors"], r["plain"]
     assert r["moving"]
     assert int(np.isfinite(e).sum()) >= int(np.isfinite(plain).sum())
-    assert float(np.nanmax(e)) <= float(np.nanmax(plain)), (float(np.nanmax(e)), float(np.nanmax(plain)))
+    assert float(np.nanmax(e)) <= MAX_ERR_M, (float(np.nanmax(e)), int(np.nanargmax(e)))
 
 
-def test_still_card_is_not_taken_for_a_moving_one():
-    """A card lying still on a desk, the camera moving (the bundled tuning orbit over a board): the room is
-    rigid with the anchors and the map keeps carrying."""
+@pytest.mark.parametrize("name", ["board_orbit", "static_camera", "printer_bed"])
+def test_still_card_is_not_taken_for_a_moving_one(name):
+    """A card lying still on a desk: the room is rigid with the anchors and the map keeps carrying. The
+    bundled orbit over a board (the camera moves), a lone marker before a camera on a tripod (the background
+    stands still, and so do the marker's corners, within their noise) and a lone marker on a printer bed
+    seen from a moving camera (the background moves with the marker)."""
     from scenes import bundled_recording
 
-    frames, session = bundled_recording("board_orbit")
+    frames, session = bundled_recording(name)
     with Tracker(session.camera, session.anchors) as tr:
         for t, img, _ in frames:
             tr.process(img, t)

@@ -1,7 +1,8 @@
 """Anchors that move in the room (a card held up to a webcam): on keypoint frames the background (ORB
 features off the anchors between two checked frames, and the map's points off them) is tested against the
-anchors' poses (`tracking.slam.anchor_motion`); once it disagrees, `MovingAnchors.moving` turns on for the
-rest of the session and the tracker drops its map."""
+anchors' poses (`tracking.slam.anchor_motion`), and for a lone marker or QR code, whose pose is too loose for
+that, in pixels: whether the background stood still while the anchors' corners moved. Once it disagrees,
+`MovingAnchors.moving` turns on for the rest of the session and the tracker drops its map."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ import numpy as np
 from tracking.camera import Camera
 from tracking.fusion.handover import Handover, fits_well
 from tracking.poses import rotation_angle
-from tracking.slam.anchor_motion import MIN_BACKGROUND, background_rigid, disagrees, on_anchor, outline_region
+from tracking.slam.anchor_motion import (MIN_BACKGROUND, background_rigid, background_shift, disagrees, on_anchor,
+                                         outline_region)
 from tracking.slam.frame_pose import position_spread
 
 # checks in a row on which the background map disagrees with the anchors (`anchor_motion.disagrees`) before
@@ -26,6 +28,13 @@ MOVED_MISS = 0.5
 MOVED_TURN_DEG = 1.5
 MOVED_SHIFT_M = 0.03
 MOVED_SURE = 0.9   # ... and above which, on 3 * MIN_BACKGROUND matches or more, one check is enough
+# the still-background test for a lone marker or QR code (`_still_background_verdict`): the background's
+# matches moved STILL_SHIFT_PX or less (median), STILL_SHARE of them less than `anchor_motion.STILL_PX`, while
+# the anchors' corners moved STILL_MOVED_PX or more (median)
+STILL_SHIFT_PX = 0.5
+STILL_SHARE = 0.6
+STILL_MOVED_PX = 4.0
+STILL_SURE = 2.5   # ... times which, on 3 * MIN_BACKGROUND matches or more, one check is enough
 MOVED_REF_FRAMES = 45   # frames after which the test's earlier frame is too old to compare with
 
 
@@ -42,6 +51,8 @@ class MovingAnchors:
         self.votes = 0        # background-map checks in a row that disagreed with the anchors
         self.strong = False   # the last check that disagreed did so beyond doubt (MOVED_SURE)
         self.ref: tuple | None = None   # (frame, Features, anchors' pose, their outline px) to compare with
+        # (frame, Features, the anchors' corners in the image px, their outline px) for the still-background test
+        self.still_ref: tuple | None = None
 
     def check(self, ar, anchor_pose, corners_w, feats, X, D, frame: int, steady: bool) -> bool:
         """Compare the anchors' pose this frame with the pose the map's points off the anchors give, fitted
@@ -52,9 +63,13 @@ class MovingAnchors:
         if self.moving or len(feats) < self.min_inliers or ar.covered:
             return False
         # only a board that fits well holds its turn to a few hundredths of a degree; a lone marker's pose turns
-        # by a degree with its noise (5-9 px at the image edge: a still desk then reads as moving)
+        # by a degree with its noise (5-9 px at the image edge: a still desk then reads as moving), so a lone
+        # marker is compared with the background in pixels instead
+        board = self.handover.board_fit(ar) is not None
         verdict = (self._background_verdict(anchor_pose, feats, frame)
-                   if steady and self.handover.board_fit(ar) is not None and fits_well(ar) else None)
+                   if steady and board and fits_well(ar) else None)
+        if verdict is None and not board:
+            verdict = self._still_background_verdict(anchor_pose, corners_w, feats, frame)
         off = ~on_anchor(X, self.handover.anchors.outlines)
         if verdict is None and off.sum() >= self.min_inliers:
             p, pi, _, inl = self.track_map(anchor_pose, X[off], D[off], feats)
@@ -73,6 +88,32 @@ class MovingAnchors:
         if self.votes >= MOVED_CHECKS or self.strong:
             self.moving = True
         return self.moving
+
+    def _still_background_verdict(self, anchor_pose, corners_w, feats, frame: int) -> bool | None:
+        """The still-background test for a lone marker or QR code (whose four corners hold the pose too
+        loosely to compare poses), in pixels and without any pose: between an earlier checked frame and
+        this one, the background (`anchor_motion.background_shift`) stood still while the anchors' corners
+        moved by STILL_MOVED_PX or more: the camera is still and the anchors move in the room. None when it
+        cannot say (the background moved: a moving camera, left to the map's test; or the corners did not
+        move enough yet: the earlier frame is kept so that the motion adds up)."""
+        region = outline_region(self.camera, anchor_pose, self.handover.anchors.outlines)
+        px = self.camera.project_world(np.asarray(corners_w, float).reshape(-1, 3), anchor_pose)
+        now = (frame, feats, px, region)
+        ref = self.still_ref
+        if ref is None or frame - ref[0] > MOVED_REF_FRAMES or len(ref[2]) != len(px):
+            self.still_ref = now
+            return None
+        n, shift, still = background_shift((ref[1], None, ref[3]), (feats, None, region))
+        moved = float(np.median(np.linalg.norm(px - ref[2], axis=1)))
+        if n < MIN_BACKGROUND or not (shift <= STILL_SHIFT_PX and still >= STILL_SHARE):
+            self.still_ref = now
+            return None
+        if moved < STILL_MOVED_PX:
+            return None
+        self.still_ref = now
+        # a still background on many matches while the corners moved well past their noise: no doubt
+        self.strong = n >= 3 * MIN_BACKGROUND and moved >= STILL_SURE * STILL_MOVED_PX
+        return True
 
     def _background_verdict(self, anchor_pose, feats, frame: int) -> bool | None:
         """The background's two-view test (`anchor_motion.background_rigid`) between this frame and an earlier

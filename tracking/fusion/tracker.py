@@ -36,9 +36,10 @@ map keeps the pace it would have live, whatever the machine's load.
 
 Anchors that move in the room (a card held up to a webcam, `anchors_moving`): on keypoint frames the
 background (ORB features off the anchors between two checked frames, and the map's points off them) is
-tested against the anchors' poses (`tracking.slam.anchor_motion`); once it disagrees, the map is dropped
-and no longer built, only flow on points of the anchors' own plane within their outline carries unreadable
-frames, and a frame nothing on the anchors carries is lost.
+tested against the anchors' poses (`tracking.slam.anchor_motion`; a lone marker's corners against a still
+background, in pixels); once it disagrees, the map is dropped and no longer built, only flow on points of
+the anchors' own plane within their outline carries unreadable frames, a lone marker read again after a
+swing starts the pose even smeared, and a frame nothing on the anchors carries is lost.
 
 Anchor measurements that must not move the model: a lone marker whose white
 margin is partly covered (a hand reaching in, `anchors.occlusion`) is not shown
@@ -98,6 +99,7 @@ class Tracker:
         # the anchors' own filter smooths the marker-only frames before the map carries the pose
         self.anchor_tracker = AnchorTracker(anchors, camera, filter=cfg.filter, cover_fraction=cfg.cover_fraction,
                                             cover_weight=cfg.cover_weight, new_anchor_gate=cfg.new_anchor_gate)
+        self._desk = self.anchor_tracker.desk   # its desk judge, off while the anchors move in the room
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="anchors") if cfg.slam else None
         n_features = cfg.n_features
         if n_features is None:
@@ -128,6 +130,7 @@ class Tracker:
             self.mapper.wait_idle()
         self.map.clear()
         self.motion.reset()
+        self.anchor_tracker.desk = self._desk   # (back on if the anchors were seen to move: `_drop_map`)
         self.anchor_tracker.reset()
         self._fresh_state()
 
@@ -371,6 +374,12 @@ class Tracker:
         self.map.clear()
         self.keyframes.submissions = []
         self.flow.tracks = None
+        # nor may the anchors' desk judge (a lone marker's tilt from the keypoints around it, taken to lie on
+        # its plane: tracking.anchors.desk) follow the surroundings any longer: a wall behind a held card
+        # moves in the image as no point on the card does, and its fit pulls the pose centimetres off
+        if self.anchor_tracker.desk is not None:
+            self.anchor_tracker.desk.reset()
+            self.anchor_tracker.desk = None
 
     def _without_fit(self, ar, pred, markers: int) -> TrackResult:
         """Neither anchors nor the map gave a pose: flow from the last frame, else the partly covered
@@ -402,6 +411,10 @@ class Tracker:
             got = self._follow_on_anchors()
         if got is not None:
             return self._flow_result(got, markers)
+        if self.status.lost == 0:
+            # the card moves unseen (a swing): the anchors' filter state and tracked corners are stale, and a
+            # filter that carried them over would lag the card's new place by centimetres when it is read again
+            self.anchor_tracker.reset()
         return self._lost_frame(markers)
 
     def _moving_anchors_hold(self, ar, pose, got) -> tuple[bool, tuple | None]:
@@ -409,6 +422,11 @@ class Tracker:
         ran): not when they cannot start the pose, are implausible, or the flow on them holds better."""
         h, frame, t = self.handover, self.frame, self.frame.t
         if self.status.lost > 0 or self.motion.last is None:
+            if h.board_fit(ar) is None:
+                # a lone marker or QR code after a swing: nothing else can carry the card, and its smeared
+                # reading is what plain detection shows (the sharpness rule waits for a camera's next,
+                # sharper frames; a card keeps swinging); a board's smeared start reads centimetres off
+                return True, got
             return not h.cannot_start(ar, frame), got
         if not h.plausible(pose, self.motion.last, t) or h.start_uncertain(ar, frame):
             # a board smeared at a swing's start reads centimetres off: the points on it, else lost

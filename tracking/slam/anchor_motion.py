@@ -73,6 +73,7 @@ INV_DEPTHS = np.linspace(1 / 5.0, 20.0, 200)
 RIGID_PX = 3.0          # pixels: a background match further than this from every such depth's image is not rigid
 MIN_BACKGROUND = 20     # background matches a verdict needs
 RATIO = 0.8             # Lowe's ratio test on ORB distances
+STILL_PX = 1.0          # pixels: a background match that moved less than this between two frames stands still
 
 
 def _inside(px: np.ndarray, region: np.ndarray | None, grow: float) -> np.ndarray:
@@ -81,6 +82,36 @@ def _inside(px: np.ndarray, region: np.ndarray | None, grow: float) -> np.ndarra
         return np.zeros(len(px), bool)
     poly = np.asarray(region, np.float32).reshape(-1, 1, 2)
     return np.array([cv2.pointPolygonTest(poly, (float(x), float(y)), True) > -grow for x, y in px], bool)
+
+
+def _background_matches(before: tuple, now: tuple, grow_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (i1, i2) of the ORB features of two frames outside the anchors' outlines (grown by `grow_px`)
+    matched by Lowe's ratio test (none when either frame has under MIN_BACKGROUND such features); `before`,
+    `now`: (Features, world_from_camera, outline region) as `background_rigid` takes them."""
+    (f1, _, r1), (f2, _, r2) = before, now
+    a = np.nonzero(~_inside(f1.xy, r1, grow_px))[0]
+    b = np.nonzero(~_inside(f2.xy, r2, grow_px))[0]
+    if len(a) < MIN_BACKGROUND or len(b) < MIN_BACKGROUND:
+        return np.zeros(0, int), np.zeros(0, int)
+    matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
+    knn = matcher.knnMatch(f1.desc[a], f2.desc[b], k=2)
+    pairs = [(m[0].queryIdx, m[0].trainIdx) for m in knn
+             if len(m) == 2 and m[0].distance < RATIO * m[1].distance and m[0].distance < 64]
+    if not pairs:
+        return np.zeros(0, int), np.zeros(0, int)
+    return a[[q for q, _ in pairs]], b[[t for _, t in pairs]]
+
+
+def background_shift(before: tuple, now: tuple, grow_px: float = 12.0) -> tuple[int, float, float]:
+    """How far the background moves in the image between two frames, in pixels, without any pose:
+    (background matches as `background_rigid` makes them, their median displacement (distorted pixels),
+    the fraction of them that moved less than `STILL_PX`). A still camera sees its background stand still
+    to a fraction of a pixel (ORB's own noise), whatever a card held before it does."""
+    i1, i2 = _background_matches(before, now, grow_px)
+    if len(i1) < MIN_BACKGROUND:
+        return len(i1), float("nan"), 0.0
+    d = np.linalg.norm(now[0].xy[i2] - before[0].xy[i1], axis=1)
+    return len(i1), float(np.median(d)), float(np.mean(d < STILL_PX))
 
 
 def background_rigid(K: np.ndarray, before: tuple, now: tuple, grow_px: float = 12.0) -> tuple[int, float]:
@@ -92,19 +123,10 @@ def background_rigid(K: np.ndarray, before: tuple, now: tuple, grow_px: float = 
     depth (the epipolar segment). A still camera before a moving card sees its background stand still while
     the anchors' poses say the camera moved: no indoor depth explains that, nor a room that moves other than
     the anchors do (a camera and a card both moving)."""
-    (f1, p1, r1), (f2, p2, r2) = before, now
-    a = np.nonzero(~_inside(f1.xy, r1, grow_px))[0]
-    b = np.nonzero(~_inside(f2.xy, r2, grow_px))[0]
-    if len(a) < MIN_BACKGROUND or len(b) < MIN_BACKGROUND:
-        return 0, 0.0
-    matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
-    knn = matcher.knnMatch(f1.desc[a], f2.desc[b], k=2)
-    pairs = [(m[0].queryIdx, m[0].trainIdx) for m in knn
-             if len(m) == 2 and m[0].distance < RATIO * m[1].distance and m[0].distance < 64]
-    if len(pairs) < MIN_BACKGROUND:
-        return len(pairs), 0.0
-    i1 = a[[q for q, _ in pairs]]
-    i2 = b[[t for _, t in pairs]]
+    (f1, p1, _), (f2, p2, _) = before, now
+    i1, i2 = _background_matches(before, now, grow_px)
+    if len(i1) < MIN_BACKGROUND:
+        return len(i1), 0.0
     T = np.linalg.inv(np.asarray(p2, float)) @ np.asarray(p1, float)   # cam2_from_cam1
     R, t = T[:3, :3], T[:3, 3]
     Kinv = np.linalg.inv(K)
@@ -119,4 +141,4 @@ def background_rigid(K: np.ndarray, before: tuple, now: tuple, grow_px: float = 
     d = np.hypot(u - f2.und[i2, 0:1], v - f2.und[i2, 1:2])
     d = np.where(z > 0, d, np.inf)
     miss = np.nanmin(d, axis=1) > RIGID_PX
-    return len(pairs), float(miss.mean())
+    return len(i1), float(miss.mean())

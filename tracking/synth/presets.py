@@ -378,14 +378,15 @@ def preset(name: str) -> dict:
 # Cards held before a camera (tracking.synth.held, issue 25): the anchors on a textured card moved by hand
 # in front of a textured wall, seen by a still webcam (a laptop's) or by a moving camera too ("both").
 # Rendered on demand and cached (tests/scenes.py `held_recording`), not bundled. Tuning ones (scene
-# 331-333, desk 431-433, wall 531-533) may be looked at; test ones (scene 131-133, desk 231-233, wall
-# 251-253) are only measured.
+# 331-334, desk 431-434, wall 531-534) may be looked at; test ones (scene 131-134, desk 231-234, wall
+# 251-254) are only measured.
 def _held_keys(seed: int, swings: list[tuple[float, float, list[float], list[float]]],
-               duration: float, drift_mm: float = 60.0) -> list[dict]:
+               duration: float, drift_mm: float = 60.0, rest: tuple[float, float] | None = None) -> list[dict]:
     """Card keys (tracking.synth.held) over `duration` s: the card starts still at the room origin facing
     the camera, drifts slowly (a few cm a second: readable) between swings, each swing (start s,
     length s, centre shift [x, y, z] m, rotation vector [deg]) a fast move past reading to a new place;
-    a hand's tremor of ~2 mm on every key. Repeatable for a seed."""
+    a hand's tremor of ~2 mm on every key. `rest` (from s, to s): the card is put down and lies still
+    then (no drift). Repeatable for a seed."""
     rng = np.random.default_rng(seed + 4242)
     keys, centre, rot, t = [], np.zeros(3), np.zeros(3), 0.0
     keys.append({"t": 0.0, "centre": [0.0, 0.0, 0.0], "rot": [0.0, 0.0, 0.0]})
@@ -398,8 +399,11 @@ def _held_keys(seed: int, swings: list[tuple[float, float, list[float], list[flo
         while start - t > 0.45:
             t += 0.4
             d = rng.normal(0, 1, 3) * [1.0, 0.3, 1.0]
-            centre = centre + d / np.linalg.norm(d) * drift_mm * 0.4 / 1000
-            rot = rot + rng.normal(0, 2.5, 3)
+            wobble = rng.normal(0, 2.5, 3)
+            if not (rest is not None and rest[0] <= t <= rest[1] + 0.4):
+                centre = centre + d / np.linalg.norm(d) * drift_mm * 0.4 / 1000
+                rot = rot + wobble
+            # (lying still: the same place keyed every 0.4 s, so the spline holds it there)
             keys.append({"t": round(t, 3), "centre": [round(float(v), 5) for v in centre],
                          "rot": [round(float(v), 3) for v in rot]})
         if shift is None:
@@ -419,7 +423,7 @@ def _held_keys(seed: int, swings: list[tuple[float, float, list[float], list[flo
 
 def _held(name: str, seed: int, desk_seed: int, wall_seed: int, anchor: dict, card: tuple[float, float],
           swings: list, camera: dict, hfov_deg: float = 62.0, dist: list[float] | None = None,
-          duration: float = 4.0) -> dict:
+          duration: float = 4.0, rest: tuple[float, float] | None = None) -> dict:
     """A held-card scene: 640x480 at 30 fps, `anchor` on a `card` (width, height m) card held before the
     camera (`camera`: the trajectory block, room frame), webcam effects with motion blur over 60 % of the
     frame interval (global shutter), a wall 0.8 m behind the card."""
@@ -433,7 +437,7 @@ def _held(name: str, seed: int, desk_seed: int, wall_seed: int, anchor: dict, ca
         "video": {"fourcc": "MJPG", "quality": 80},
         "supersample": 2,
         "held": {"wall": {"distance": 0.8, "size": [3.2, 2.6], "ppm": 450, "seed": wall_seed},
-                 "keys": _held_keys(seed, swings, duration)},
+                 "keys": _held_keys(seed, swings, duration, rest=rest)},
     }
 
 
@@ -481,6 +485,14 @@ HELD: dict[str, dict] = {
     "test_held_both": _held("test_held_both", 133, 233, 253, _board(4, 3, 0.035, 0.008, 30), (0.23, 0.18),
                             [(1.5, 0.22, [-0.14, 0.01, 0.05], [4, 10, -6]), (2.7, 0.25, [0.15, 0.0, -0.04], [-4, -10, 6])],
                             _hand_camera(133, dx=0.14), hfov_deg=62),
+    # both move, and the board card is put down for ~2.5 s between its swings while the hand-held camera
+    # goes on moving (the map may come back, and must go again at the second swing)
+    "tune_held_rest": _held("tune_held_rest", 334, 434, 534, _board(4, 3, 0.034, 0.008, 36), (0.22, 0.17),
+                            [(1.2, 0.22, [0.13, 0.0, 0.04], [-6, 8, 0]), (4.3, 0.25, [-0.12, 0.01, -0.05], [5, -8, 4])],
+                            _hand_camera(334), duration=5.2, rest=(1.5, 4.2)),
+    "test_held_rest": _held("test_held_rest", 134, 234, 254, _board(4, 3, 0.035, 0.008, 4), (0.23, 0.18),
+                            [(1.3, 0.25, [-0.13, 0.01, 0.05], [5, 7, 0]), (4.4, 0.22, [0.12, 0.0, -0.04], [-4, -8, 5])],
+                            _hand_camera(134, dx=0.13), hfov_deg=62, duration=5.3, rest=(1.6, 4.3)),
 }
 HELD_TUNING = [n for n in HELD if not n.startswith("test_")]
 HELD_TEST = [n for n in HELD if n.startswith("test_")]
