@@ -114,6 +114,7 @@ class AnchorTracker:
         self.deskew_extrapolate_min = 12  # points (three markers' corners): see _deskew
         self.unblur_px = None if unblur_px is None else float(unblur_px)
         self._tracked_only = False
+        self._caller_cfw: np.ndarray | None = None   # the caller's camera_from_world this frame (process)
         self.outlier_px = float(outlier_px)
         self.branch_decay = float(branch_decay)
         self.branch_switch = float(branch_switch)
@@ -231,7 +232,9 @@ class AnchorTracker:
         self._tracked_only = False
         fast = self._moving_fast(pred_cfw)
         ref_cfw = invert(reference) if reference is not None else pred_cfw
-        aruco_obs = self._detect_aruco(gray, pred_cfw, fast, None if reference is None else ref_cfw)
+        # (the caller's own pose this frame, where the anchors are looked for when they were not tracked)
+        self._caller_cfw = None if reference is None else ref_cfw
+        aruco_obs = self._detect_aruco(gray, pred_cfw, fast)
         qr_obs = self.qr.process(gray, pred_cfw, self._expected_qr(pred_cfw)) if self.qr.models else []
         obs, rejected = self._screen_new(aruco_obs + qr_obs, ref_cfw)
         obs, covered = self._drop_covered(gray, obs, fast, pred_cfw)
@@ -521,14 +524,13 @@ class AnchorTracker:
         """`occlusion.refit_covered` with this tracker's camera and lone-marker edge margin."""
         return refit_covered(self.camera, gray, model, ids, quads, bits, pred_cfw, self.lone_end_margin)
 
-    def _detect_aruco(self, gray: np.ndarray, pred_cfw: np.ndarray | None, fast: bool = False,
-                      ref_cfw: np.ndarray | None = None) -> list[Observation]:
+    def _detect_aruco(self, gray: np.ndarray, pred_cfw: np.ndarray | None, fast: bool = False) -> list[Observation]:
         """The ArUco anchors' observations: re-found on their edges where `pred_cfw` puts them, else detected
         in a region around that, else in the whole frame. Not re-found while the camera moves `fast`
         (a prediction off by more than half a cell, as it is then, never re-finds them: time lost).
 
-        When the anchors were not tracked last frame but the caller's pose holds this one (`ref_cfw`: its
-        map or flow carries the pose), they are looked for only where that pose puts them (a fast pan
+        When the anchors were not tracked last frame but the caller's pose holds this one (its `reference`
+        to `process`: its map or flow carries the pose), they are looked for only where that pose puts them (a fast pan
         smears them past reading for many frames, each a whole frame's detector pass for nothing), and not
         at all while it puts every anchor outside the image; the whole frame is still searched every
         `full_every` frames."""
@@ -547,8 +549,8 @@ class AnchorTracker:
         # failed region search would just add to the full-frame one
         if self.roi and pred_cfw is not None and self.frame % self.full_every and self.tracked_keys:
             roi = self._aruco_roi(pred_cfw, gray.shape)
-        elif self.roi and ref_cfw is not None and self.frame % self.full_every:
-            roi = self._aruco_roi(ref_cfw, gray.shape, outside=True)
+        elif self.roi and self._caller_cfw is not None and self.frame % self.full_every:
+            roi = self._aruco_roi(self._caller_cfw, gray.shape, outside=True)
             if roi == "outside":
                 return []
             if roi is not None:
