@@ -12,7 +12,8 @@ normal markers as well: corners moved by up to 5 px before the edge fit). The po
 last found in is kept in `ArucoDetection.polarity`. "normal" or "inverted" pins one: the other is
 never tried. `other_every` (the anchor tracker sets it): once every anchor of a dictionary has been found
 in some polarity, a miss is more likely motion blur or the anchors out of view than the print turned
-over, so the other polarity is tried only on every `other_every`-th consecutive miss (1: on every miss).
+over, so the other polarity is tried only on every `other_every`-th consecutive miss (1: on every miss);
+before that, on every second miss.
 """
 
 from __future__ import annotations
@@ -159,12 +160,14 @@ class ArucoDetection:
         return out
 
     def _try_other(self, key: tuple[str, str], ours: dict[int, AnchorModel]) -> bool:
-        """Whether to read the other polarity after a miss in the usual one: always while some anchor of
-        this dictionary was never found (its print is unknown), else on every `other_every`-th miss in a row
-        (this miss counted)."""
-        if self.other_every <= 1 or any(m.index not in self.polarity for m in ours.values()):
+        """Whether to read the other polarity after a miss in the usual one: on every `other_every`-th miss in
+        a row (this miss counted) once every anchor of this dictionary was found in some polarity, on every
+        second one while some anchor's print is unknown (a board coming into view is read normal first, on
+        every frame; an inverted one is seen at most a frame later)."""
+        if self.other_every <= 1:
             return True
-        return (self._misses.get(key, 0) + 1) % self.other_every == 0
+        every = 2 if any(m.index not in self.polarity for m in ours.values()) else self.other_every
+        return (self._misses.get(key, 0) + 1) % every == 0
 
     def _last_polarity(self, ours: dict[int, AnchorModel]) -> str:
         """The polarity most of these anchors were last found in ("normal" when none was found yet)."""

@@ -68,7 +68,7 @@ class AnchorTracker:
     `ambiguous`, and once it has, the desk's fit is the frame's measurement. False: never.
     other_polarity_every: once each ArUco anchor was found in some polarity (its print), a detection that
     finds none of a dictionary's anchors reads the other polarity only on every this-many-th miss in a row
-    (detect.ArucoDetection.other_every); 1: on every miss.
+    (detect.ArucoDetection.other_every; on every second one until then); 1: on every miss.
     """
 
     def __init__(self, anchors: list[AnchorSpec], camera: Camera, filter: bool = True, *, roi: bool = True,
