@@ -102,6 +102,9 @@ class ArucoDetection:
         # the other polarity on every `other_every`-th consecutive miss once each anchor's print is known
         self.other_every = 1
         self._misses: dict[tuple[str, str], int] = {}   # (dictionary, pin) -> consecutive misses
+        # detector passes run and the pixels they read, since construction (benchmarks, diagnostics)
+        self.passes = 0
+        self.pixels_read = 0
         self._world_cache: dict = {}  # (anchor, id) -> (world_from_anchor bytes, world corners): _world_corners
 
     def detect(self, gray: np.ndarray, roi: tuple[int, int, int, int] | None = None) -> list[Observation]:
@@ -183,6 +186,8 @@ class ArucoDetection:
                 self._negative = cv2.bitwise_not(gray)
             gray = self._negative
         corners, ids, _ = det.detectMarkers(gray)
+        self.passes += 1
+        self.pixels_read += gray.shape[0] * gray.shape[1]
         if ids is None:
             return [], 0
         # all markers' corners in full-image pixels at once
