@@ -530,10 +530,10 @@ class AnchorTracker:
         (a prediction off by more than half a cell, as it is then, never re-finds them: time lost).
 
         When the anchors were not tracked last frame but the caller's pose holds this one (its `reference`
-        to `process`: its map or flow carries the pose), they are looked for only where that pose puts them (a fast pan
-        smears them past reading for many frames, each a whole frame's detector pass for nothing), and not
-        at all while it puts every anchor outside the image; the whole frame is still searched every
-        `full_every` frames."""
+        to `process`: its map or flow carries the pose), they are looked for only where that pose puts
+        them (a fast pan smears them past reading for many frames, each a whole frame's detector pass for
+        nothing), and not at all while it puts every anchor outside the image; the whole frame is still
+        searched every `full_every` frames."""
         if not self.aruco.models:
             return []
         if (self.track_markers and not fast and pred_cfw is not None and self.frame % self.full_every
