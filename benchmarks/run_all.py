@@ -23,7 +23,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-ORDER = ["geometry", "anchors", "slam", "render", "slicer", "link", "gui"]
+ORDER = ["geometry", "anchors", "slam", "slam_cpu", "render", "slicer", "link", "gui"]
 
 
 def machine() -> str:

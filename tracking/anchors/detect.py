@@ -10,7 +10,10 @@ image. So a normal board in view costs nothing extra, and its corners are exactl
 `detectInvertedMarker` would do both in one pass for a few percent, but it picks other contours of
 normal markers as well: corners moved by up to 5 px before the edge fit). The polarity each anchor was
 last found in is kept in `ArucoDetection.polarity`. "normal" or "inverted" pins one: the other is
-never tried.
+never tried. `other_every` (the anchor tracker sets it): once every anchor of a dictionary has been found
+in some polarity, a miss is more likely motion blur or the anchors out of view than the print turned
+over, so the other polarity is tried only on every `other_every`-th consecutive miss (1: on every miss);
+before that, on every second miss.
 """
 
 from __future__ import annotations
@@ -97,6 +100,12 @@ class ArucoDetection:
                 cp.minMarkers = 1
                 self.charuco[m.index] = cv2.aruco.CharucoDetector(m.board, cp, params)
         self.last_foreign = 0  # markers of the right dictionaries but ids of no anchor, last frame
+        # the other polarity on every `other_every`-th consecutive miss once each anchor's print is known
+        self.other_every = 1
+        self._misses: dict[tuple[str, str], int] = {}   # (dictionary, pin) -> consecutive misses
+        # detector passes run and the pixels they read, since construction (benchmarks, diagnostics)
+        self.passes = 0
+        self.pixels_read = 0
         self._world_cache: dict = {}  # (anchor, id) -> (world_from_anchor bytes, world corners): _world_corners
 
     def detect(self, gray: np.ndarray, roi: tuple[int, int, int, int] | None = None) -> list[Observation]:
@@ -114,10 +123,11 @@ class ArucoDetection:
             first = pin if pin != "auto" else self._last_polarity(ours)
             found, foreign_here = self._markers(det, gray, first, ours, (x0, y0))
             foreign += foreign_here
-            if not found and pin == "auto":
+            if not found and pin == "auto" and self._try_other((d, pin), ours):
                 # none of them in the polarity they were last seen in: the other print
                 first = "inverted" if first == "normal" else "normal"
                 found, _ = self._markers(det, gray, first, ours, (x0, y0))
+            self._misses[(d, pin)] = 0 if found else self._misses.get((d, pin), 0) + 1
             for mid, c in found:
                 self.polarity[ours[mid].index] = first
                 per_anchor.setdefault(ours[mid].index, []).append((mid, c, d))
@@ -153,6 +163,16 @@ class ArucoDetection:
             out.append(Observation(m.index, obj, img, groups, len(found), square=m.anchor_kind.single_square))
         return out
 
+    def _try_other(self, key: tuple[str, str], ours: dict[int, AnchorModel]) -> bool:
+        """Whether to read the other polarity after a miss in the usual one: on every `other_every`-th miss in
+        a row (this miss counted) once every anchor of this dictionary was found in some polarity, on every
+        second one while some anchor's print is unknown (a board coming into view is read normal first, on
+        every frame; an inverted one is seen at most a frame later)."""
+        if self.other_every <= 1:
+            return True
+        every = 2 if any(m.index not in self.polarity for m in ours.values()) else self.other_every
+        return (self._misses.get(key, 0) + 1) % every == 0
+
     def _last_polarity(self, ours: dict[int, AnchorModel]) -> str:
         """The polarity most of these anchors were last found in ("normal" when none was found yet)."""
         seen = [self.polarity[i] for i in {m.index for m in ours.values()} if i in self.polarity]
@@ -167,6 +187,8 @@ class ArucoDetection:
                 self._negative = cv2.bitwise_not(gray)
             gray = self._negative
         corners, ids, _ = det.detectMarkers(gray)
+        self.passes += 1
+        self.pixels_read += gray.shape[0] * gray.shape[1]
         if ids is None:
             return [], 0
         # all markers' corners in full-image pixels at once

@@ -66,6 +66,9 @@ class AnchorTracker:
     `desk_ambiguous_px` RMS (small, seen nearly head-on) is judged by the desk around it (desk.DeskPlane: its
     keypoints followed from a reference frame fix the plane's tilt); until that decides, results say
     `ambiguous`, and once it has, the desk's fit is the frame's measurement. False: never.
+    other_polarity_every: once each ArUco anchor was found in some polarity (its print), a detection that
+    finds none of a dictionary's anchors reads the other polarity only on every this-many-th miss in a row
+    (detect.ArucoDetection.other_every; on every second one until then); 1: on every miss.
     """
 
     def __init__(self, anchors: list[AnchorSpec], camera: Camera, filter: bool = True, *, roi: bool = True,
@@ -74,7 +77,7 @@ class AnchorTracker:
                  cover_fraction: float = 0.2, cover_weight: float = 0.1, refit_weight: float = 0.3,
                  new_anchor_gate: float = 0.5, unblur_px: float | None = 2.0, lone_end_margin: float = 0.1,
                  cover_relax_s: float = 0.2, hold_sigmas: float = 2.0, desk: bool = True,
-                 desk_ambiguous_px: float = 1.0, **filter_params):
+                 desk_ambiguous_px: float = 1.0, other_polarity_every: int = 8, **filter_params):
         if not anchors:
             raise ValueError("AnchorTracker needs at least one anchor (the session's anchors list is empty)")
         self.anchors = list(anchors)
@@ -94,6 +97,9 @@ class AnchorTracker:
         self.new_anchor_gate = float(new_anchor_gate)
         self.lone_end_margin = float(lone_end_margin)
         self.aruco.lone_end_margin = self.lone_end_margin
+        # a print seen once does not turn over: after a miss the other polarity is read only every 8th miss
+        # in a row (a pan smearing the board past reading would pay a second detector pass a frame)
+        self.aruco.other_every = int(other_polarity_every)
         self.cover_relax_s = float(cover_relax_s)
         self.hold_sigmas = float(hold_sigmas)
         self.hold_rank_ratio = 0.1   # pose directions the corners show less than this (of the best) are not corrected
@@ -108,6 +114,7 @@ class AnchorTracker:
         self.deskew_extrapolate_min = 12  # points (three markers' corners): see _deskew
         self.unblur_px = None if unblur_px is None else float(unblur_px)
         self._tracked_only = False
+        self._caller_cfw: np.ndarray | None = None   # the caller's camera_from_world this frame (process)
         self.outlier_px = float(outlier_px)
         self.branch_decay = float(branch_decay)
         self.branch_switch = float(branch_switch)
@@ -224,9 +231,11 @@ class AnchorTracker:
         pred_cfw = None if pred is None else invert(pred)
         self._tracked_only = False
         fast = self._moving_fast(pred_cfw)
+        ref_cfw = invert(reference) if reference is not None else pred_cfw
+        # (the caller's own pose this frame, where the anchors are looked for when they were not tracked)
+        self._caller_cfw = None if reference is None else ref_cfw
         aruco_obs = self._detect_aruco(gray, pred_cfw, fast)
         qr_obs = self.qr.process(gray, pred_cfw, self._expected_qr(pred_cfw)) if self.qr.models else []
-        ref_cfw = invert(reference) if reference is not None else pred_cfw
         obs, rejected = self._screen_new(aruco_obs + qr_obs, ref_cfw)
         obs, covered = self._drop_covered(gray, obs, fast, pred_cfw)
         obs = self._deskew(obs, t)
@@ -518,7 +527,13 @@ class AnchorTracker:
     def _detect_aruco(self, gray: np.ndarray, pred_cfw: np.ndarray | None, fast: bool = False) -> list[Observation]:
         """The ArUco anchors' observations: re-found on their edges where `pred_cfw` puts them, else detected
         in a region around that, else in the whole frame. Not re-found while the camera moves `fast`
-        (a prediction off by more than half a cell, as it is then, never re-finds them: time lost)."""
+        (a prediction off by more than half a cell, as it is then, never re-finds them: time lost).
+
+        When the anchors were not tracked last frame but the caller's pose holds this one (its `reference`
+        to `process`: its map or flow carries the pose), they are looked for only where that pose puts
+        them (a fast pan smears them past reading for many frames, each a whole frame's detector pass for
+        nothing), and not at all while it puts every anchor outside the image; the whole frame is still
+        searched every `full_every` frames."""
         if not self.aruco.models:
             return []
         if (self.track_markers and not fast and pred_cfw is not None and self.frame % self.full_every
@@ -534,14 +549,22 @@ class AnchorTracker:
         # failed region search would just add to the full-frame one
         if self.roi and pred_cfw is not None and self.frame % self.full_every and self.tracked_keys:
             roi = self._aruco_roi(pred_cfw, gray.shape)
+        elif self.roi and self._caller_cfw is not None and self.frame % self.full_every:
+            roi = self._aruco_roi(self._caller_cfw, gray.shape, outside=True)
+            if roi == "outside":
+                return []
+            if roi is not None:
+                return self.aruco.detect(gray, roi)
         if roi is not None:
             obs = self.aruco.detect(gray, roi)
             if obs:
                 return obs
         return self.aruco.detect(gray)
 
-    def _aruco_roi(self, cfw: np.ndarray, shape) -> tuple[int, int, int, int] | None:
-        """Box around the predicted image of every ArUco anchor in front of the camera; None = whole frame."""
+    def _aruco_roi(self, cfw: np.ndarray, shape, outside: bool = False) -> tuple[int, int, int, int] | str | None:
+        """Box around the predicted image of every ArUco anchor in front of the camera; None = whole frame.
+        `outside`: "outside" when every anchor, with the box's slack, lies in front of the camera but wholly
+        outside the image (else None for that too)."""
         pts, z = project(self.camera, cfw, np.concatenate([self.outlines[m.index] for m in self.aruco.models]))
         if np.any(z <= 0.01):
             return None
@@ -551,6 +574,8 @@ class AnchorTracker:
         pad = 0.2 * (hi - lo) + 24
         x0, y0 = np.maximum(np.floor(lo - pad), 0).astype(int)
         x1, y1 = np.minimum(np.ceil(hi + pad), [w, h]).astype(int)
+        if outside and (x1 <= x0 or y1 <= y0):
+            return "outside"
         if x1 - x0 < 32 or y1 - y0 < 32 or (x1 - x0) * (y1 - y0) > 0.7 * w * h:
             return None
         return int(x0), int(y0), int(x1), int(y1)
