@@ -13,7 +13,7 @@ from tracking.anchors.detect import ArucoDetection
 from tracking.anchors.model import build_models
 from tracking.anchors.render import look_at, render_view
 from tracking.camera import Camera
-from tracking.session import parse_anchors
+from tracking.recording.schema import parse_anchors
 
 CAM = Camera(np.array([[600.0, 0, 319.5], [0, 600.0, 239.5], [0, 0, 1]]), np.zeros(5), 640, 480)
 BOARD = {"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 4, "markers_y": 3, "marker_length": 0.04,
