@@ -22,14 +22,12 @@ from typing import Any, Callable
 import numpy as np
 
 from arapp.engine import commands as cmd
-from arapp.engine import recording
 from arapp.app import source_anchors
 from arapp.engine.editing import display_placement, edited_model, model_mesh
 from arapp.engine.events import Events
-from arapp.engine.capture import VIDEO_CODECS, new_capture_path, save_screenshot
 from arapp.app.first_picture import FirstPictureWatch, no_picture_message
 from arapp.app.history import History
-from arapp.app.model_export import export_model
+from arapp.app.captures import Captures
 from arapp.app.print_session import PrintSession
 from arapp.app.runner import ImmediateRunner
 from arapp.engine.sourcespec import DEFAULT_ANCHORS, display_name
@@ -37,6 +35,7 @@ from arapp.exchange.meshes import is_mesh_path
 from arapp.engine.pipeline import MODES, OCCLUSION_MODES, load_display_model
 from arapp.geometry.placement import Placement, dragged_placement, placement_point_at_pixel
 from arapp.app.scene_keeper import SceneKeeper
+from arapp.app.settings import MemorySettings, as_bool
 from tracking.anchors.defaults import DEFAULT_DICTIONARY
 from tracking.anchors.discover import Suggestion
 from tracking.recording.schema import parse_anchors
@@ -47,24 +46,6 @@ RECENT_MAX = 8
 GHOST_MODE = "translucent"
 OCCLUSION_CHOICES = ("auto", *OCCLUSION_MODES)  # auto: depth when the frames carry depth, else off
 GHOST_NOTE = "Print preview on the bed: the model on the marker is drawn see-through meanwhile"
-
-
-class MemorySettings:
-    """Settings kept in a dict, with the two methods of QSettings the app model uses."""
-
-    def __init__(self, values: dict | None = None):
-        self.values = dict(values or {})
-
-    def value(self, key: str, default=None, type=None):  # noqa: A002 - QSettings' name
-        return self.values.get(key, default)
-
-    def setValue(self, key: str, value) -> None:  # noqa: N802 - QSettings' name
-        self.values[key] = value
-
-
-def as_bool(value) -> bool:
-    """A stored flag: QSettings' ini files give "true"/"false" strings."""
-    return value if isinstance(value, bool) else str(value).strip().lower() in ("true", "1", "yes")
 
 
 def read_model(path: str):
@@ -143,8 +124,7 @@ class Session:
         self.toolpaths_gen = 0
         self.toolpaths_info: dict | None = None  # what the engine drew
         self._unghost_gen: int | None = None  # the preview clear after which the model is drawn solid again
-        self.recording_folder = None
-        self.ar_video_path: Path | None = None  # the AR video being recorded (arapp.engine.capture)
+        self.captures = Captures(self)  # recording, screenshot, AR video, export (arapp.app.captures)
         self.print_session: PrintSession | None = None
         self._drag = None  # (mode, grabbed paper point mm, placement at the grab, pose at the grab)
         self._edit = self.run.latest(retessellate, self._edit_done, self._edit_failed, name="arapp-edit")
@@ -215,7 +195,7 @@ class Session:
 
         handlers = EngineHandlers(opened=mine(self._opened), ready=mine(self._frame_ready),
                                   error=lambda t, m: self._engine_error(engine, t, m),
-                                  ended=mine(self._ended), recorded=self._recorded,
+                                  ended=mine(self._ended), recorded=self.captures.recorded,
                                   toolpaths=mine(self._toolpaths_shown))
         engine = self.make_engine(spec, name=name, anchors=anchors, speed=self.speed, loop=self.loop,
                                   handlers=handlers)
@@ -407,82 +387,40 @@ class Session:
             self.send(cmd.Reset())
             self.status("Tracking reset", 2000)
 
-    # -- recording a live source -----------------------------------------------------------
+    # -- captures: recording, screenshot, AR video, export (arapp.app.captures) ----------------
+    @property
+    def recording_folder(self) -> Path | None:
+        return self.captures.recording_folder
+
+    @property
+    def ar_video_path(self) -> Path | None:
+        return self.captures.ar_video_path
+
     @property
     def can_record(self) -> bool:
-        return self.engine is not None and self.source_info is not None and not self.source_info.seekable
-
-    def start_recording(self, folder=None):
-        """Record the live source into `folder` (default: a new recordings/gui-... folder); None when the
-        source is not live."""
-        if not self.can_record:
-            return None
-        folder = Path(folder) if folder is not None else recording.new_recording_folder()
-        self.recording_folder = folder
-        self.send(cmd.RecordStart(str(folder)))
-        self.status(f"Recording to {folder}", 5000)
-        return folder
-
-    def stop_recording(self) -> None:
-        self.recording_folder = None
-        self.send(cmd.RecordStop())
-
-    def _recorded(self, folder: str) -> None:
-        if Path(folder).suffix.lower() in VIDEO_CODECS:  # the AR video: a file to watch, not a source
-            self.status(f"Saved the AR video {folder}", 8000)
-            self.events.recorded.emit(folder)
-            return
-        self.status(f"Saved the recording {folder}", 8000)
-        self.remember("recent_sources", folder)
-        self.events.recorded.emit(folder)
-
-    # -- screenshot and AR video ----------------------------------------------------------
-    def save_screenshot(self, path=None) -> Path | None:
-        """Save the composited view (model over the camera) as an image; default captures/screenshot-*.png.
-        None (reported) when nothing is shown or the file cannot be written."""
-        try:
-            saved = save_screenshot(self.last_shown, path if path is not None else new_capture_path("screenshot", ".png"))
-        except ValueError as exc:
-            self.report("Cannot save the screenshot", str(exc))
-            return None
-        self.status(f"Saved the screenshot {saved}", 8000)
-        return saved
+        return self.captures.can_record
 
     @property
     def can_record_ar(self) -> bool:
-        return self.engine is not None and self.source_info is not None
+        return self.captures.can_record_ar
+
+    def start_recording(self, folder=None):
+        return self.captures.start_recording(folder)
+
+    def stop_recording(self) -> None:
+        self.captures.stop_recording()
+
+    def save_screenshot(self, path=None) -> Path | None:
+        return self.captures.save_screenshot(path)
 
     def start_ar_recording(self, path=None) -> Path | None:
-        """Record what is on screen (camera + model) to a video (.mp4 or .avi; default captures/ar-*.mp4)."""
-        if not self.can_record_ar or self.ar_video_path is not None:
-            return None
-        path = Path(path) if path is not None else new_capture_path("ar", ".mp4")
-        self.ar_video_path = path
-        self.send(cmd.ArRecordStart(str(path)))
-        self.status(f"Recording the AR view to {path}", 5000)
-        self.events.ar_recording_changed.emit(True)
-        return path
+        return self.captures.start_ar_recording(path)
 
     def stop_ar_recording(self) -> None:
-        if self.ar_video_path is None:
-            return
-        self.ar_video_path = None
-        self.send(cmd.ArRecordStop())
-        self.events.ar_recording_changed.emit(False)
+        self.captures.stop_ar_recording()
 
     def export_model(self, path) -> Path | None:
-        """Write the edited model as placed (STL/3MF/OBJ/PLY/GLB, mm) or as NURBS JSON (model units);
-        None (reported) on failure."""
-        if self.model is None:
-            self.report("Nothing to export", "Open a model first (Model panel or File > Open model)")
-            return None
-        try:
-            saved = export_model(self.model, self.placement, path)
-        except (ValueError, OSError) as exc:
-            self.report("Cannot export the model", str(exc))
-            return None
-        self.status(f"Exported {saved}", 8000)
-        return saved
+        return self.captures.export_model(path)
 
     # -- models ----------------------------------------------------------------------------
     def open_model(self, path: str) -> None:

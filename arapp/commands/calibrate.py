@@ -48,23 +48,10 @@ def check_args(args) -> None:
 
 
 def run(args) -> int:
-    from pathlib import Path
-
-    import cv2
-
-    from tracking.calibration import BoardSpec, ViewCollector, solve
-    from tracking.errors import CalibrationError
+    from tracking.calibration import ViewCollector, solve
 
     check_args(args)
-    if args.anchors:
-        from tracking.recording.schema import parse_anchors, read_anchor_blocks
-
-        specs = parse_anchors(read_anchor_blocks(args.anchors), where=f"{args.anchors}: anchors")
-        board = BoardSpec.from_anchor(specs[0], f"{args.anchors}: anchors[0]")
-        print(f"board from {args.anchors}: {specs[0].anchor_kind.describe(specs[0])}")
-    else:
-        board = BoardSpec(args.board, args.squares_x, args.squares_y, args.square_length,
-                          args.marker_length if args.board == "charuco" else None, args.dictionary)
+    board = _board(args)
     if args.calibration:
         from tracking.calibration_file import read_calibration_file
 
@@ -79,49 +66,90 @@ def run(args) -> int:
         print(f"{name}: {verdict} ({len(col.views)} kept, coverage {col.coverage * 100:.0f} %)")
 
     if args.images:
-        folder = Path(args.images)
-        if not folder.is_dir():
-            raise CalibrationError(f"--images {folder}: not a folder")
-        files = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"))
-        if not files:
-            raise CalibrationError(f"--images {folder}: no png/jpg/bmp/tif images in it")
-        for p in files:
-            img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
-            if img is None:
-                print(f"{p.name}: unreadable, skipped")
-                continue
-            consider(img, p.name)
-            if len(col.views) >= args.max_views:
-                break
+        _views_from_images(args, col, consider)
     else:
-        from tracking.sources import open_source
-
-        with open_source(args.source) as source:
-            for frame in source:
-                if frame.index % max(args.every, 1):
-                    continue
-                consider(frame.image, f"frame {frame.index}")
-                if len(col.views) >= args.max_views:
-                    break
+        _views_from_source(args, col, consider)
     print(f"rejected: {col.rejected}")
-    guess = None
-    if args.calibration and col.views:
-        from tracking.camera import Camera
-        from tracking.sources.base import _fit_camera
-
-        cam, notes = Camera.load_file(args.calibration, (col.width, col.height))
-        for line in notes:
-            print(line)
-        guess = _fit_camera(cam, col.width, col.height, args.calibration, "the views")
+    guess = _guess(args, col) if args.calibration and col.views else None
     res = solve(col.views, col.width, col.height, col.coverage, min_views=args.min_views, guess=guess)
     print(res.report(names))
     if col.coverage < 0.5:
         print(f"warning: the board covered only {col.coverage * 100:.0f} % of the image; views near the edges and "
               "corners give better distortion estimates")
-    out = Path(args.output)
+    _write(res, args.output)
+    print(f"wrote {args.output}")
+    return 0
+
+
+def _board(args):
+    """The calibration target: the first anchor of --anchors, else the board the options describe."""
+    from tracking.calibration import BoardSpec
+
+    if args.anchors:
+        from tracking.recording.schema import parse_anchors, read_anchor_blocks
+
+        specs = parse_anchors(read_anchor_blocks(args.anchors), where=f"{args.anchors}: anchors")
+        board = BoardSpec.from_anchor(specs[0], f"{args.anchors}: anchors[0]")
+        print(f"board from {args.anchors}: {specs[0].anchor_kind.describe(specs[0])}")
+        return board
+    return BoardSpec(args.board, args.squares_x, args.squares_y, args.square_length,
+                     args.marker_length if args.board == "charuco" else None, args.dictionary)
+
+
+def _views_from_images(args, col, consider) -> None:
+    """Offer the images of the --images folder, in name order, until --max-views are kept."""
+    from pathlib import Path
+
+    import cv2
+
+    from tracking.errors import CalibrationError
+
+    folder = Path(args.images)
+    if not folder.is_dir():
+        raise CalibrationError(f"--images {folder}: not a folder")
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"))
+    if not files:
+        raise CalibrationError(f"--images {folder}: no png/jpg/bmp/tif images in it")
+    for p in files:
+        img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            print(f"{p.name}: unreadable, skipped")
+            continue
+        consider(img, p.name)
+        if len(col.views) >= args.max_views:
+            break
+
+
+def _views_from_source(args, col, consider) -> None:
+    """Offer every --every-th frame of --source until --max-views are kept."""
+    from tracking.sources import open_source
+
+    with open_source(args.source) as source:
+        for frame in source:
+            if frame.index % max(args.every, 1):
+                continue
+            consider(frame.image, f"frame {frame.index}")
+            if len(col.views) >= args.max_views:
+                break
+
+
+def _guess(args, col):
+    """The --calibration file's camera fitted to the views' size: the solver's starting point."""
+    from tracking.camera import Camera
+    from tracking.sources.base import _fit_camera
+
+    cam, notes = Camera.load_file(args.calibration, (col.width, col.height))
+    for line in notes:
+        print(line)
+    return _fit_camera(cam, col.width, col.height, args.calibration, "the views")
+
+
+def _write(res, output: str) -> None:
+    """Save the calibration to `output` through a temporary file: never half written under its name."""
+    from pathlib import Path
+
+    out = Path(output)
     tmp = out.with_name(f".{out.name}.tmp{out.suffix}")  # OpenCV picks the format by suffix: keep it
     out.parent.mkdir(parents=True, exist_ok=True)
     res.camera.save_yaml(tmp, {"rms_px": res.rms, "views": len(res.used)})
-    tmp.replace(out)  # never a half-written calibration under the final name
-    print(f"wrote {args.output}")
-    return 0
+    tmp.replace(out)

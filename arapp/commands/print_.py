@@ -236,27 +236,13 @@ def _job_to_resume(args, profile):
 
 
 def run(args) -> int:
-    from arapp.printing.link.factory import SerialTarget, make_link
-    from arapp.printing.link.job import Program, resume_commands
+    from arapp.printing.link.job import Program
 
-    if args.save_key:
-        from arapp.printing.link.webapi import save_api_key
-
-        path = save_api_key(args.save_key, _read_key_interactively())
-        print(f"API key saved to {path} (mode 600)", file=sys.stderr)
-        if args.api_key_file is None:
-            args.api_key_file = str(path)
-        if args.input is None and args.resume is None:
-            return 0
+    if args.save_key and _save_key(args):
+        return 0
     _check_link_args(args)
-    profile = None
     network = _chosen_links(args)
-    if args.printer is not None or args.resume or (not network and not args.port) or (
-            args.input and Path(args.input).suffix.lower() not in GCODE_SUFFIXES):
-        from arapp.printing import load_profile
-
-        profile = load_profile(args.printer)
-
+    profile = _profile_if_needed(args, network)
     state, gcode_path = _job_to_resume(args, profile)
     if gcode_path.suffix.lower() not in GCODE_SUFFIXES:
         gcode_path = _slice_model(args, profile)
@@ -277,26 +263,9 @@ def run(args) -> int:
         if state is not None:
             raise ValueError("--resume works with the serial link (--port) only")
     if network:
-        name, target = _network_links()[network[0]]
-        link = make_link(target(args), profile=profile, job_path=job_path)
-        link.connect()
-        print(f"connected to {link.version or name} at {link.url}", file=sys.stderr)
-        job = lambda: link.print_gcode(lines, progress=show, gcode_path=str(gcode_path))  # noqa: E731
+        link, job = _network_job(args, network[0], profile, job_path, lines, show, gcode_path)
     else:
-        port = args.port or (profile.link.port if profile is not None else None)
-        baud = args.baud or (profile.link.baud if profile is not None else 115200)
-        link = make_link(SerialTarget(port or "", baud, args.window, args.timeout), profile=profile,
-                         job_path=job_path)
-        preamble = []
-        if state is not None:
-            state.check_program(program, gcode_path)
-            bed_height = profile.bed.height if profile is not None else None
-            preamble = resume_commands(state, bed_height=bed_height)
-            print(f"resuming {gcode_path} at line {state.next_line + 1} (layer {state.layer})", file=sys.stderr)
-        link.connect()
-        print(f"connected to {link.firmware or 'printer'} on {port}", file=sys.stderr)
-        job = lambda: link.print_gcode(lines, progress=show, gcode_path=str(gcode_path.resolve()),  # noqa: E731
-                                       program=program, state=state, preamble=preamble)
+        link, job = _serial_job(args, profile, job_path, lines, show, gcode_path, program, state)
     try:
         final, interrupted = _run_job(link, job)
     finally:
@@ -307,3 +276,57 @@ def run(args) -> int:
         note += f"; {final.message}"
     print(f"{final.status}: {final.commands_done}/{final.commands_total} lines, job state in {job_path}{note}")
     return 130 if interrupted else 0
+
+
+def _save_key(args) -> bool:
+    """Store the API key typed in for --save-key; True when that is all there is to do (no job given)."""
+    from arapp.printing.link.webapi import save_api_key
+
+    path = save_api_key(args.save_key, _read_key_interactively())
+    print(f"API key saved to {path} (mode 600)", file=sys.stderr)
+    if args.api_key_file is None:
+        args.api_key_file = str(path)
+    return args.input is None and args.resume is None
+
+
+def _profile_if_needed(args, network: list[str]):
+    """The printer profile when the job needs one (named, resuming, slicing, or the profile's own link);
+    else None."""
+    if args.printer is not None or args.resume or (not network and not args.port) or (
+            args.input and Path(args.input).suffix.lower() not in GCODE_SUFFIXES):
+        from arapp.printing import load_profile
+
+        return load_profile(args.printer)
+    return None
+
+
+def _network_job(args, which: str, profile, job_path: Path, lines, show, gcode_path: Path):
+    """(link, job): the network link `which` connected, and the call that prints through it."""
+    from arapp.printing.link.factory import make_link
+
+    name, target = _network_links()[which]
+    link = make_link(target(args), profile=profile, job_path=job_path)
+    link.connect()
+    print(f"connected to {link.version or name} at {link.url}", file=sys.stderr)
+    return link, lambda: link.print_gcode(lines, progress=show, gcode_path=str(gcode_path))
+
+
+def _serial_job(args, profile, job_path: Path, lines, show, gcode_path: Path, program, state):
+    """(link, job): the serial link connected, and the call that prints (or resumes `state`) through it."""
+    from arapp.printing.link.factory import SerialTarget, make_link
+    from arapp.printing.link.job import resume_commands
+
+    port = args.port or (profile.link.port if profile is not None else None)
+    baud = args.baud or (profile.link.baud if profile is not None else 115200)
+    link = make_link(SerialTarget(port or "", baud, args.window, args.timeout), profile=profile,
+                     job_path=job_path)
+    preamble = []
+    if state is not None:
+        state.check_program(program, gcode_path)
+        bed_height = profile.bed.height if profile is not None else None
+        preamble = resume_commands(state, bed_height=bed_height)
+        print(f"resuming {gcode_path} at line {state.next_line + 1} (layer {state.layer})", file=sys.stderr)
+    link.connect()
+    print(f"connected to {link.firmware or 'printer'} on {port}", file=sys.stderr)
+    return link, lambda: link.print_gcode(lines, progress=show, gcode_path=str(gcode_path.resolve()),
+                                          program=program, state=state, preamble=preamble)

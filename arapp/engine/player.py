@@ -232,23 +232,13 @@ class Player(threading.Thread):
             if stop:
                 return
             if seek is not None and self.seekable:
-                seek = max(0, min(seek, int(self.source.frame_count) - 1))
-                self.source.seek(frame=seek)
-                it = iter(self.source)
-                self.last_index = seek - 1
-                if not self._playing:
-                    with self._cond:
-                        self._steps = max(self._steps, 1)  # show the frame sought to
+                it = self._seek_to(seek)
                 continue
             if (self._playing and not is_step and self.seekable and self.on_demand and first is None):
                 if not self._wait_demand():
                     continue
-                nxt = self.last_index + 1
-                due = self._due_index(nxt)
-                if due > nxt:
-                    self.source.seek(frame=due)
-                    it = iter(self.source)
-                    self.skipped += due - nxt
+                ahead = self._skip_to_due()
+                it = it if ahead is None else ahead
             try:
                 with self._cond:
                     self._demanded = False
@@ -257,36 +247,73 @@ class Player(threading.Thread):
                 else:
                     frame = next(it)
             except StopIteration:
-                error = getattr(self.source, "error", None)
-                if error:
-                    title = "Camera lost" if self.live else "The recording is damaged"
-                    self._fail(title, error if isinstance(error, BaseException) else RuntimeError(str(error)))
-                    if self.live:
-                        return
-                if self.seekable and self._loop and not error:
-                    self.source.seek(frame=0)
-                    it = iter(self.source)
-                    self.last_index = -1
-                    with self._cond:
-                        self._ref = None
-                        fps = float(getattr(self.source, "fps", 0) or 30.0)
-                        self._wrap_delay = 1.0 / (fps * self._speed)
-                    continue
-                if self.live:
-                    raise RuntimeError("the camera stopped delivering frames")
-                with self._cond:
-                    self._playing = False
-                    self._steps = 0
-                if self.on_end is not None:
-                    self.on_end()
+                stop, looped = self._source_ended()
+                if stop:
+                    return
+                it = it if looped is None else looped
                 continue
             if self._playing and not self.live and not is_step and not self._pace(float(frame.t)):
                 return
-            item = Captured(int(frame.index), float(frame.t), frame.image, time.perf_counter(),
-                            getattr(frame, "depth", None))
-            self.frames_read += 1
-            self.last_index = item.index
-            if self.recorder is not None:
-                self.recorder.write(item)
-            self.out.put(item)
+            self._hand_over(frame)
+
+    def _seek_to(self, seek: int):
+        """Seek the source to frame `seek` (clamped); paused, that frame is shown. Returns its iterator."""
+        seek = max(0, min(seek, int(self.source.frame_count) - 1))
+        self.source.seek(frame=seek)
+        it = iter(self.source)
+        self.last_index = seek - 1
+        if not self._playing:
+            with self._cond:
+                self._steps = max(self._steps, 1)  # show the frame sought to
+        return it
+
+    def _skip_to_due(self):
+        """On demand, behind the clock: seek ahead to the frame due now (counted in `skipped`) and return
+        the new iterator; None when the next frame is the one due."""
+        nxt = self.last_index + 1
+        due = self._due_index(nxt)
+        if due <= nxt:
+            return None
+        self.source.seek(frame=due)
+        self.skipped += due - nxt
+        return iter(self.source)
+
+    def _source_ended(self):
+        """The source gave no more frames: (stop the loop?, new iterator when it loops back to the start).
+
+        A source error is reported (a lost camera stops the loop); a looping seekable source starts again;
+        a live one that just stops raises; else playback pauses at the end and `on_end` is called."""
+        error = getattr(self.source, "error", None)
+        if error:
+            title = "Camera lost" if self.live else "The recording is damaged"
+            self._fail(title, error if isinstance(error, BaseException) else RuntimeError(str(error)))
+            if self.live:
+                return True, None
+        if self.seekable and self._loop and not error:
+            self.source.seek(frame=0)
+            it = iter(self.source)
+            self.last_index = -1
+            with self._cond:
+                self._ref = None
+                fps = float(getattr(self.source, "fps", 0) or 30.0)
+                self._wrap_delay = 1.0 / (fps * self._speed)
+            return False, it
+        if self.live:
+            raise RuntimeError("the camera stopped delivering frames")
+        with self._cond:
+            self._playing = False
+            self._steps = 0
+        if self.on_end is not None:
+            self.on_end()
+        return False, None
+
+    def _hand_over(self, frame) -> None:
+        """Pass a frame read on: counted, recorded when recording, put on the output queue."""
+        item = Captured(int(frame.index), float(frame.t), frame.image, time.perf_counter(),
+                        getattr(frame, "depth", None))
+        self.frames_read += 1
+        self.last_index = item.index
+        if self.recorder is not None:
+            self.recorder.write(item)
+        self.out.put(item)
 

@@ -58,8 +58,70 @@ def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | 
     options = options or ReplayOptions()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    model = load_display_model(options.model) if options.model else None
+    source, camera, pipeline, scene_run = _set_up(recording, options, say)
+    total = source.frame_count or 0  # 0: a video whose container gives no frame count
+    if options.max_frames is not None:
+        total = min(total, options.max_frames) if total else options.max_frames
+    run = _Run()
+    video = _LazyVideo(out / "overlay.mp4", source, camera.width, camera.height) if options.video else None
+    t_start = time.perf_counter()
+    with open(out / "poses.tum", "w") as poses_f, open(out / "tracking.csv", "w") as csv_f:
+        poses_f.write("# t tx ty tz qx qy qz qw\n")
+        csv_f.write("frame,t,state,markers,inliers,ms\n")
+        try:
+            _run_frames(source, pipeline, scene_run, options, (poses_f, csv_f, video), run, progress, cancel, total)
+        except KeyboardInterrupt:
+            run.interrupted = True
+        finally:
+            if video is not None:
+                video.release()
+            saved = _save_scene(scene_run, pipeline, options, say) if scene_run is not None else None
+            pipeline.close()
+            error = getattr(source, "error", None)
+            source.close()
+    wall = time.perf_counter() - t_start
+    report = _report(recording, out, run.n, run.states, wall, run.interrupted, error,
+                     run.times[-1] if run.times else None)
+    if scene_run is not None:
+        report["scene"] = {**scene_run.summary(), **(saved or {})}
+        for line in scene_run.notes if say is not None else ():
+            say(line)
+    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
+    return report
 
+
+@dataclass
+class _Run:
+    """What the frame loop saw: frames processed, their times and tracking states, whether it was stopped."""
+
+    n: int = 0
+    times: list = field(default_factory=list)
+    states: list = field(default_factory=list)
+    interrupted: bool = False
+
+
+class _LazyVideo:
+    """The overlay video, opened on the first frame written (no file when no frame comes), at the source's
+    frame rate then."""
+
+    def __init__(self, path: Path, source, width: int, height: int):
+        self.path, self.source, self.size = path, source, (width, height)
+        self.writer = None
+
+    def write(self, image) -> None:
+        if self.writer is None:
+            self.writer = _open_writer(self.path, self.source.fps, *self.size)
+        self.writer.write(image)
+
+    def release(self) -> None:
+        if self.writer is not None:
+            self.writer.release()
+
+
+def _set_up(recording, options: ReplayOptions, say):
+    """(source, camera, pipeline, scene run or None): the input opened, the pipeline built with the
+    options' model, placement, scene and toolpaths; everything opened is closed again on failure."""
+    model = load_display_model(options.model) if options.model else None
     opened = open_input(recording, calibration=options.calibration, anchors=options.anchors)
     source, camera, anchors = opened.source, opened.camera, opened.anchors
     if options.occlusion == "depth" and not getattr(source, "has_depth", False):
@@ -84,63 +146,37 @@ def replay(recording: str | Path, out_dir: str | Path, options: ReplayOptions | 
     if options.toolpaths:
         line_sets, world_from_bed = toolpath_overlay(options.toolpaths, options.printer, anchors, options.layer)
         pipeline.set_toolpaths(line_sets, world_from_bed)
+    return source, camera, pipeline, scene_run
 
-    total = source.frame_count or 0  # 0: a video whose container gives no frame count
-    if options.max_frames is not None:
-        total = min(total, options.max_frames) if total else options.max_frames
-    writer = None
-    video_path = out / "overlay.mp4"
-    times, states = [], []
-    interrupted = False
-    error = None
-    t_start = time.perf_counter()
-    n = 0
-    with open(out / "poses.tum", "w") as poses_f, open(out / "tracking.csv", "w") as csv_f:
-        poses_f.write("# t tx ty tz qx qy qz qw\n")
-        csv_f.write("frame,t,state,markers,inliers,ms\n")
-        try:
-            for frame in source:
-                if options.max_frames is not None and n >= options.max_frames:
-                    break
-                if cancel is not None and cancel.is_set():
-                    interrupted = True
-                    break
-                res = pipeline.process(frame.image, frame.t, frame.index, depth=getattr(frame, "depth", None))
-                if scene_run is not None:
-                    scene_run.observe(frame.image, frame.t, res.world_from_camera, res.state)
-                if res.world_from_camera is not None:
-                    poses_f.write(tum_line(frame.t, res.world_from_camera))
-                    poses_f.flush()
-                csv_f.write(f"{frame.index},{frame.t:.6f},{res.state},{res.markers},{res.inliers},{res.ms_track:.3f}\n")
-                csv_f.flush()
-                if options.video:
-                    if writer is None:
-                        writer = _open_writer(video_path, source.fps, camera.width, camera.height)
-                    writer.write(res.image)
-                times.append(frame.t)
-                states.append(res.state)
-                n += 1
-                # faster than real time: let mapping take the time a live frame interval gives it
-                pipeline.tracker.catch_up()
-                if progress is not None:
-                    progress(n, total)
-        except KeyboardInterrupt:
-            interrupted = True
-        finally:
-            if writer is not None:
-                writer.release()
-            saved = _save_scene(scene_run, pipeline, options, say) if scene_run is not None else None
-            pipeline.close()
-            error = getattr(source, "error", None)
-            source.close()
-    wall = time.perf_counter() - t_start
-    report = _report(recording, out, n, states, wall, interrupted, error, times[-1] if times else None)
-    if scene_run is not None:
-        report["scene"] = {**scene_run.summary(), **(saved or {})}
-        for line in scene_run.notes if say is not None else ():
-            say(line)
-    (out / "report.json").write_text(json.dumps(report, indent=2) + "\n")
-    return report
+
+def _run_frames(source, pipeline: Pipeline, scene_run, options: ReplayOptions, outputs, run: _Run,
+                progress, cancel, total: int) -> None:
+    """Process the source's frames into outputs = (poses.tum file, tracking.csv file, video or None),
+    counting in `run`, until the end, `options.max_frames` or `cancel`."""
+    poses_f, csv_f, video = outputs
+    for frame in source:
+        if options.max_frames is not None and run.n >= options.max_frames:
+            break
+        if cancel is not None and cancel.is_set():
+            run.interrupted = True
+            break
+        res = pipeline.process(frame.image, frame.t, frame.index, depth=getattr(frame, "depth", None))
+        if scene_run is not None:
+            scene_run.observe(frame.image, frame.t, res.world_from_camera, res.state)
+        if res.world_from_camera is not None:
+            poses_f.write(tum_line(frame.t, res.world_from_camera))
+            poses_f.flush()
+        csv_f.write(f"{frame.index},{frame.t:.6f},{res.state},{res.markers},{res.inliers},{res.ms_track:.3f}\n")
+        csv_f.flush()
+        if video is not None:
+            video.write(res.image)
+        run.times.append(frame.t)
+        run.states.append(res.state)
+        run.n += 1
+        # faster than real time: let mapping take the time a live frame interval gives it
+        pipeline.tracker.catch_up()
+        if progress is not None:
+            progress(run.n, total)
 
 
 def _start_scene(pipeline: Pipeline, camera, anchors, options: ReplayOptions, say):

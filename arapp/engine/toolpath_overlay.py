@@ -90,43 +90,56 @@ def toolpath_line_sets(layers, bed_size: tuple[float, float, float], layer: int 
         else:
             role = "full" if (layer is None or gl.index == top) else "below"
             full = role == "full"
-        for kind, rgba in KIND_COLOURS.items():
-            if kind == "travel" and (not travel or role not in ("full", "current")):
-                continue
-            seg = gl.segments(kinds=(kind,), extruding=kind != "travel")
-            if not len(seg):
-                continue
-            outside = out_of_bed(seg, width, depth, height)
-            colour = tuple(rgba) if full else (*rgba[:3], rgba[3] * DIM_ALPHA)
-            if role == "current" and kind != "travel":
-                colour = CURRENT_COLOUR
-            width_px = 1.0 if kind == "travel" else (2.0 if full else 1.0)
-            if role == "current" and kind != "travel":
-                width_px = 3.0
-            groups.setdefault((colour, width_px), []).append((gl.index, seg[~outside]))
-            if outside.any():
-                groups.setdefault((OUT_OF_BED_COLOUR, 3.0), []).append((gl.index, seg[outside]))
+        _group_layer(groups, gl, role, full, travel, bed_size)
     zs = [float(gl.z) for gl in layers]
     pitch = (zs[-1] - zs[0]) / (n - 1) if n > 1 else 0.0
-    sets = []
-    for (colour, width_px), parts in groups.items():
-        parts = [(k, p) for k, p in parts if len(p)]
-        if not parts:
-            continue
-        seg = np.concatenate([p for _, p in parts])
-        starts, seen, at = [], set(), 0
-        for k, p in parts:  # layers in order (the loop above walks them bottom up)
-            if k not in seen:
-                seen.add(k)
-                starts.append(at)
-            at += len(p)
-        stack = len(starts) > 1 and pitch > 0
-        sets.append(LineSet(seg, colour, width_px, 0.0, layer_starts=np.array(starts) if stack else None,
-                            layer_pitch=pitch if stack else 0.0))
+    sets = [s for s in (_stacked_set(colour, width_px, parts, pitch) for (colour, width_px), parts in groups.items())
+            if s is not None]
     any_outside = (OUT_OF_BED_COLOUR, 3.0) in groups
     outline_colour = OUT_OF_BED_COLOUR if any_outside else BED_OUTLINE_COLOUR
     sets.append(LineSet([bed_outline(width, depth)], outline_colour, 3.0 if any_outside else 2.0, 0.0))
     return sets
+
+
+def _group_layer(groups: dict, gl, role: str, full: bool, travel: bool, bed_size) -> None:
+    """Add layer `gl`'s segments to `groups` {(colour, width_px): [(layer index, segments)]}, by kind, in the
+    colour and width of its role ("full", "below", "current", "printed", "to print"); moves outside the
+    build volume go to the out-of-bed group."""
+    width, depth, height = bed_size
+    for kind, rgba in KIND_COLOURS.items():
+        if kind == "travel" and (not travel or role not in ("full", "current")):
+            continue
+        seg = gl.segments(kinds=(kind,), extruding=kind != "travel")
+        if not len(seg):
+            continue
+        outside = out_of_bed(seg, width, depth, height)
+        colour = tuple(rgba) if full else (*rgba[:3], rgba[3] * DIM_ALPHA)
+        if role == "current" and kind != "travel":
+            colour = CURRENT_COLOUR
+        width_px = 1.0 if kind == "travel" else (2.0 if full else 1.0)
+        if role == "current" and kind != "travel":
+            width_px = 3.0
+        groups.setdefault((colour, width_px), []).append((gl.index, seg[~outside]))
+        if outside.any():
+            groups.setdefault((OUT_OF_BED_COLOUR, 3.0), []).append((gl.index, seg[outside]))
+
+
+def _stacked_set(colour, width_px: float, parts: list, pitch: float):
+    """One LineSet of a group's [(layer index, segments)] (in layer order), with the starts of its layers
+    when it spans several (LineSet.layer_starts); None when the group has no segment."""
+    parts = [(k, p) for k, p in parts if len(p)]
+    if not parts:
+        return None
+    seg = np.concatenate([p for _, p in parts])
+    starts, seen, at = [], set(), 0
+    for k, p in parts:  # layers in order (toolpath_line_sets walks them bottom up)
+        if k not in seen:
+            seen.add(k)
+            starts.append(at)
+        at += len(p)
+    stack = len(starts) > 1 and pitch > 0
+    return LineSet(seg, colour, width_px, 0.0, layer_starts=np.array(starts) if stack else None,
+                   layer_pitch=pitch if stack else 0.0)
 
 
 def toolpath_overlay(gcode_path: str | Path, printer_path: str | Path | None, anchors, layer: int | None = None,

@@ -360,28 +360,38 @@ def parse_gcode(text: str) -> list[GcodeLayer]:
                     if extruding and math.isnan(layers[-1].z):
                         layers[-1].z = nz
             x, y, z = nx, ny, nz
-        elif head == "G90":
-            abs_xyz = True
-        elif head == "G91":
-            abs_xyz = False
-        elif head == "M82":
-            abs_e = True
-        elif head == "M83":
-            abs_e = False
-        elif head == "G92":
-            words = {k.upper(): float(v) for k, v in _WORD.findall(code[len(head):])}
-            x, y, z, e = words.get("X", x), words.get("Y", y), words.get("Z", z), words.get("E", e)
-            if not words:
-                x = y = z = e = 0.0
-        elif head == "G28":
-            axes = code[len(head):].upper()
-            if not any(a in axes for a in "XYZ"):
-                x = y = z = 0.0
-            else:
-                x = 0.0 if "X" in axes else x
-                y = 0.0 if "Y" in axes else y
-                z = 0.0 if "Z" in axes else z
+        else:
+            x, y, z, e, abs_xyz, abs_e = _other_command(head, code, (x, y, z, e), abs_xyz, abs_e)
     return layers
+
+
+def _other_command(head: str, code: str, pos: tuple, abs_xyz: bool, abs_e: bool) -> tuple:
+    """(x, y, z, e, abs_xyz, abs_e) after a command that is not a move: G90/G91 and M82/M83 switch
+    absolute/relative positions and extrusion, G92 sets the position (all of it to 0 without words), G28
+    homes the axes it names (all without); anything else changes nothing."""
+    x, y, z, e = pos
+    if head == "G90":
+        abs_xyz = True
+    elif head == "G91":
+        abs_xyz = False
+    elif head == "M82":
+        abs_e = True
+    elif head == "M83":
+        abs_e = False
+    elif head == "G92":
+        words = {k.upper(): float(v) for k, v in _WORD.findall(code[len(head):])}
+        x, y, z, e = words.get("X", x), words.get("Y", y), words.get("Z", z), words.get("E", e)
+        if not words:
+            x = y = z = e = 0.0
+    elif head == "G28":
+        axes = code[len(head):].upper()
+        if not any(a in axes for a in "XYZ"):
+            x = y = z = 0.0
+        else:
+            x = 0.0 if "X" in axes else x
+            y = 0.0 if "Y" in axes else y
+            z = 0.0 if "Z" in axes else z
+    return x, y, z, e, abs_xyz, abs_e
 
 
 _STAT_PATTERNS = {

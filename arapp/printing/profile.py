@@ -134,58 +134,12 @@ def parse_profile(data: dict, source: str = "<profile>", defaults: dict | None =
 
     Raises ProfileError naming the key for an unknown key, a wrong type or a bad value.
     """
-    if not isinstance(data, dict):
-        raise ProfileError(f"{source}: a printer profile must be a JSON object")
-    for key in data:
-        if key not in _TOP:
-            raise ProfileError(f"{source}: {key}: unknown key; known keys are {', '.join(_TOP)}")
-    for key in ("format", "name", "bed"):
-        if key not in data:
-            raise ProfileError(f"{source}: {key}: missing (a printer profile needs format, name and bed)")
-    for key, typ in _TOP.items():
-        if key in data:
-            data_value = _check(data[key], typ, key, source)
-            if typ is float and data_value <= 0:
-                raise ProfileError(f"{source}: {key}: must be positive (millimetres), got {data_value}")
-            if key in _RANGES:
-                _in_range(data_value, key, source)
-    if data["format"] != FORMAT:
-        raise ProfileError(f"{source}: format: must be {FORMAT!r}, got {data['format']!r}")
+    _check_top(data, source)
     merged = copy.deepcopy(defaults or {})
     merged.update(copy.deepcopy(data))
-
-    bed = merged["bed"]
-    for key in bed:
-        if key not in _BED:
-            raise ProfileError(f"{source}: bed.{key}: unknown key; the bed has width, depth and height (mm)")
-    dims = {}
-    for key in _BED:
-        if key not in bed:
-            raise ProfileError(f"{source}: bed.{key}: missing (the bed needs width, depth and height in mm)")
-        dims[key] = _check(bed[key], float, f"bed.{key}", source)
-        if dims[key] <= 0:
-            raise ProfileError(f"{source}: bed.{key}: must be positive (millimetres), got {dims[key]}")
-        _in_range(dims[key], f"bed.{key}", source)
-
-    link_block = dict((defaults or {}).get("link", {}))
-    link_block.update(data.get("link", {}))
-    for key in data.get("link", {}):
-        if key not in _LINK:
-            raise ProfileError(f"{source}: link.{key}: unknown key; the link has {', '.join(_LINK)}")
-    for key, typ in _LINK.items():
-        if key not in link_block:
-            if key in _LINK_REQUIRED:
-                raise ProfileError(f"{source}: link.{key}: missing")
-            continue
-        _check(link_block[key], typ, f"link.{key}", source)
-    if link_block["baud"] <= 0:
-        raise ProfileError(f"{source}: link.baud: must be positive, got {link_block['baud']}")
+    dims = _parse_bed(merged["bed"], source)
+    link_block = _parse_link(data, defaults, source)
     kind = link_block.get("kind", "serial")
-    if kind not in LINK_KINDS:
-        raise ProfileError(f"{source}: link.kind: {kind!r} is not a link kind; use one of {', '.join(LINK_KINDS)}")
-    if kind != "serial" and not str(link_block.get("url", "")).strip():
-        raise ProfileError(f"{source}: link.url: missing (a {kind} link needs the server's address, "
-                           "e.g. http://mainsailos.local)")
     merged["link"] = link_block
 
     if merged.get("flavor") not in _FLAVORS:
@@ -213,6 +167,67 @@ def parse_profile(data: dict, source: str = "<profile>", defaults: dict | None =
         max_hotend_temperature=float(merged.get("max_hotend_temperature", DEFAULT_MAX_HOTEND)),
         max_bed_temperature=float(merged.get("max_bed_temperature", DEFAULT_MAX_BED)),
     )
+
+
+def _check_top(data, source: str) -> None:
+    """The profile's top-level keys: known, the required ones present, types, signs and ranges right."""
+    if not isinstance(data, dict):
+        raise ProfileError(f"{source}: a printer profile must be a JSON object")
+    for key in data:
+        if key not in _TOP:
+            raise ProfileError(f"{source}: {key}: unknown key; known keys are {', '.join(_TOP)}")
+    for key in ("format", "name", "bed"):
+        if key not in data:
+            raise ProfileError(f"{source}: {key}: missing (a printer profile needs format, name and bed)")
+    for key, typ in _TOP.items():
+        if key in data:
+            data_value = _check(data[key], typ, key, source)
+            if typ is float and data_value <= 0:
+                raise ProfileError(f"{source}: {key}: must be positive (millimetres), got {data_value}")
+            if key in _RANGES:
+                _in_range(data_value, key, source)
+    if data["format"] != FORMAT:
+        raise ProfileError(f"{source}: format: must be {FORMAT!r}, got {data['format']!r}")
+
+
+def _parse_bed(bed: dict, source: str) -> dict:
+    """{"width", "depth", "height"} in mm from the (merged) bed block, each checked."""
+    for key in bed:
+        if key not in _BED:
+            raise ProfileError(f"{source}: bed.{key}: unknown key; the bed has width, depth and height (mm)")
+    dims = {}
+    for key in _BED:
+        if key not in bed:
+            raise ProfileError(f"{source}: bed.{key}: missing (the bed needs width, depth and height in mm)")
+        dims[key] = _check(bed[key], float, f"bed.{key}", source)
+        if dims[key] <= 0:
+            raise ProfileError(f"{source}: bed.{key}: must be positive (millimetres), got {dims[key]}")
+        _in_range(dims[key], f"bed.{key}", source)
+    return dims
+
+
+def _parse_link(data: dict, defaults: dict | None, source: str) -> dict:
+    """The link block: the defaults' with the profile's keys over it, checked (keys, types, kind, url)."""
+    link_block = dict((defaults or {}).get("link", {}))
+    link_block.update(data.get("link", {}))
+    for key in data.get("link", {}):
+        if key not in _LINK:
+            raise ProfileError(f"{source}: link.{key}: unknown key; the link has {', '.join(_LINK)}")
+    for key, typ in _LINK.items():
+        if key not in link_block:
+            if key in _LINK_REQUIRED:
+                raise ProfileError(f"{source}: link.{key}: missing")
+            continue
+        _check(link_block[key], typ, f"link.{key}", source)
+    if link_block["baud"] <= 0:
+        raise ProfileError(f"{source}: link.baud: must be positive, got {link_block['baud']}")
+    kind = link_block.get("kind", "serial")
+    if kind not in LINK_KINDS:
+        raise ProfileError(f"{source}: link.kind: {kind!r} is not a link kind; use one of {', '.join(LINK_KINDS)}")
+    if kind != "serial" and not str(link_block.get("url", "")).strip():
+        raise ProfileError(f"{source}: link.url: missing (a {kind} link needs the server's address, "
+                           "e.g. http://mainsailos.local)")
+    return link_block
 
 
 def _parse_bed_anchor(block: dict, source: str):

@@ -74,10 +74,12 @@ def _g(text: str) -> str:
 def prusa_config(settings, profile) -> dict:
     """PrusaSlicer options equivalent to the built-in slicer's settings and the printer profile."""
     w = settings.width(profile.nozzle_diameter)
-    speeds = settings.speeds()
-    mat = settings.material_info
-    bed = profile.bed
-    fan = settings.fan_percent()
+    return {**_shells_and_infill(settings, w), **_skirt_and_retraction(settings), **_speeds_and_heat(settings),
+            **_machine(settings, profile)}
+
+
+def _shells_and_infill(settings, w: float) -> dict:
+    """Layers, perimeters, solid layers, infill and extrusion widths (w mm for every feature)."""
     return {
         "layer_height": settings.layer_height,
         "first_layer_height": settings.first_layer_height,
@@ -106,6 +108,12 @@ def prusa_config(settings, profile) -> dict:
         "infill_extrusion_width": w,
         "solid_infill_extrusion_width": w,
         "top_infill_extrusion_width": w,
+    }
+
+
+def _skirt_and_retraction(settings) -> dict:
+    """Skirt, brim and retraction."""
+    return {
         "skirts": settings.skirts,
         "skirt_distance": settings.skirt_distance,
         "skirt_height": 1,
@@ -116,6 +124,14 @@ def prusa_config(settings, profile) -> dict:
         "retract_before_travel": settings.retract_min_travel,
         "retract_lift": settings.z_hop,
         "retract_layer_change": 1,
+    }
+
+
+def _speeds_and_heat(settings) -> dict:
+    """Feature speeds (mm/s), temperatures (deg C) and the part fan."""
+    speeds = settings.speeds()
+    fan = settings.fan_percent()
+    return {
         "perimeter_speed": speeds["perimeter"],
         "external_perimeter_speed": speeds["external_perimeter"],
         "small_perimeter_speed": speeds["perimeter"],
@@ -133,6 +149,14 @@ def prusa_config(settings, profile) -> dict:
         "min_fan_speed": fan,
         "max_fan_speed": fan,
         "disable_fan_first_layers": 1,
+    }
+
+
+def _machine(settings, profile) -> dict:
+    """The printer: bed shape, nozzle, filament, G-code flavour and the start/end G-code."""
+    bed = profile.bed
+    mat = settings.material_info
+    return {
         "bed_shape": f"0x0,{bed.width:g}x0,{bed.width:g}x{bed.depth:g},0x{bed.depth:g}",
         "max_print_height": bed.height,
         "nozzle_diameter": profile.nozzle_diameter,

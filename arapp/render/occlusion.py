@@ -231,14 +231,14 @@ def read_model_depth(renderer, ss_size: tuple[int, int], crop, out_crop, near: f
     GL = renderer.GL
     sw, sh = ss_size
     w, h = crop[2], crop[3]
-    if renderer._resolve is not None:
-        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._fbo[0])
-        GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, renderer._resolve[0])
+    if renderer._framebuffers.resolve is not None:
+        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._framebuffers.fbo[0])
+        GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, renderer._framebuffers.resolve[0])
         GL.glDisable(GL.GL_SCISSOR_TEST)
         GL.glBlitFramebuffer(0, 0, sw, sh, 0, 0, sw, sh, GL.GL_DEPTH_BUFFER_BIT, GL.GL_NEAREST)
-        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._resolve[0])
+        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._framebuffers.resolve[0])
     else:
-        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._fbo[0])
+        GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, renderer._framebuffers.fbo[0])
     GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 4)
     buf = np.empty((sh, sw), np.float32)
     GL.glReadPixels(0, 0, sw, sh, GL.GL_DEPTH_COMPONENT, GL.GL_FLOAT, buf)

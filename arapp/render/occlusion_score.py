@@ -48,55 +48,28 @@ def score_recording(recording: str | Path, mode: str = "depth",
     _, gt = read_tum(rec / "groundtruth.tum")
     box = trimesh.creation.box(tuple(size))
     plane = occlusion.PlaneDepth(cam) if mode == "plane" else None
-    inter_h = union_h = inter_v = union_v = 0
+    counts = np.zeros(4, np.int64)  # hidden intersection, hidden union, visible intersection, visible union
     edges, per_frame, added, alone = [], [], [], []
     src = RecordingSource(rec)
     with OverlayRenderer(cam.K, cam.dist, cam.width, cam.height) as r:
         try:
             for frame in src:
                 i = frame.index
-                truth = masks[i]
                 camera_from_world = invert(gt[i])
                 T = camera_from_world @ world_from_model
                 occ = occlusion.Occluder(mode, depth=frame.depth, plane=plane, camera_from_world=camera_from_world,
                                          params=params)
                 r.draw(frame.image, box, T, occlusion=occ)
                 if timing:
-                    # the same renderer and frame with and without occlusion, each drawn afresh (its memo of
-                    # the last crop forgotten), best of three: one GL context, no switch, less noise
-                    plain_s, occ_s = [], []
-                    for _ in range(3):
-                        r._read_depth, r._memo = False, None
-                        t0 = time.perf_counter()
-                        r.draw(frame.image, box, T)
-                        plain_s.append(time.perf_counter() - t0)
-                        r._memo = None
-                        t0 = time.perf_counter()
-                        r.draw(frame.image, box, T, occlusion=occ)
-                        occ_s.append(time.perf_counter() - t0)
-                    added.append(min(occ_s) - min(plain_s))
-                    z, x0, y0 = r._last_depth
-                    step = []
-                    for _ in range(3):
-                        t0 = time.perf_counter()
-                        occ.alpha(x0, y0, z)
-                        step.append(time.perf_counter() - t0)
-                    alone.append(min(step))
-                cover = r.render(box, T)[..., 3] >= 128
-                alpha = np.ones(cover.shape, np.float32)
-                if occ.last_alpha is not None:
-                    x0, y0 = occ.last_origin
-                    h, w = occ.last_alpha.shape
-                    alpha[y0:y0 + h, x0:x0 + w] = occ.last_alpha
-                pred_hidden = cover & (alpha < 0.5)
-                pred_visible = cover & (alpha >= 0.5)
-                gt_hidden = truth == MASK_HIDDEN
-                gt_visible = truth == MASK_VISIBLE
+                    a, b = _time_frame(r, frame.image, box, T, occ)
+                    added.append(a)
+                    alone.append(b)
+                pred_hidden, pred_visible = _predicted(r, box, T, occ)
+                gt_hidden, gt_visible = masks[i] == MASK_HIDDEN, masks[i] == MASK_VISIBLE
                 if not (gt_hidden.any() or pred_hidden.any()):
                     continue
-                ih, uh = np.count_nonzero(pred_hidden & gt_hidden), np.count_nonzero(pred_hidden | gt_hidden)
-                iv, uv = np.count_nonzero(pred_visible & gt_visible), np.count_nonzero(pred_visible | gt_visible)
-                inter_h, union_h, inter_v, union_v = inter_h + ih, union_h + uh, inter_v + iv, union_v + uv
+                counts += [np.count_nonzero(pred_hidden & gt_hidden), np.count_nonzero(pred_hidden | gt_hidden),
+                           np.count_nonzero(pred_visible & gt_visible), np.count_nonzero(pred_visible | gt_visible)]
                 e = edge_error_px(pred_hidden, gt_hidden)
                 if e is not None:
                     edges.append(e)
@@ -104,8 +77,44 @@ def score_recording(recording: str | Path, mode: str = "depth",
                                   "hidden_px": int(gt_hidden.sum()), "edge_px": e})
         finally:
             src.close()
+    inter_h, union_h, inter_v, union_v = counts
     ms = lambda v: float(np.median(v) * 1e3) if v else float("nan")  # noqa: E731
     return OcclusionScore(inter_h / union_h if union_h else float("nan"),
                           inter_v / union_v if union_v else float("nan"),
                           float(np.mean(edges)) if edges else float("nan"), len(per_frame),
                           ms(added), ms(alone), per_frame)
+
+
+def _time_frame(r, image, box, T, occ) -> tuple[float, float]:
+    """(seconds occlusion adds to a draw, seconds of the occluder's alpha step alone) on this frame.
+
+    The same renderer and frame with and without occlusion, each drawn afresh (its memo of the last crop
+    forgotten), best of three: one GL context, no switch, less noise."""
+    plain_s, occ_s = [], []
+    for _ in range(3):
+        r._read_depth, r._memo = False, None
+        t0 = time.perf_counter()
+        r.draw(image, box, T)
+        plain_s.append(time.perf_counter() - t0)
+        r._memo = None
+        t0 = time.perf_counter()
+        r.draw(image, box, T, occlusion=occ)
+        occ_s.append(time.perf_counter() - t0)
+    z, x0, y0 = r._last_depth
+    step = []
+    for _ in range(3):
+        t0 = time.perf_counter()
+        occ.alpha(x0, y0, z)
+        step.append(time.perf_counter() - t0)
+    return min(occ_s) - min(plain_s), min(step)
+
+
+def _predicted(r, box, T, occ):
+    """(hidden, visible) boolean masks of the image: the model's pixels the occluder faded out, and the rest."""
+    cover = r.render(box, T)[..., 3] >= 128
+    alpha = np.ones(cover.shape, np.float32)
+    if occ.last_alpha is not None:
+        x0, y0 = occ.last_origin
+        h, w = occ.last_alpha.shape
+        alpha[y0:y0 + h, x0:x0 + w] = occ.last_alpha
+    return cover & (alpha < 0.5), cover & (alpha >= 0.5)

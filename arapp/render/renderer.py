@@ -15,7 +15,6 @@ the OpenCV camera frame (x right, y down, z forward). The anchor plane is z = 0 
 
 from __future__ import annotations
 
-import weakref
 from collections import OrderedDict
 
 import cv2
@@ -23,16 +22,14 @@ import numpy as np
 import trimesh
 
 from arapp.render import composite, modes, occlusion as occlusion_mod, projection
+from arapp.render.framebuffers import FBO_STEP, CropFramebuffers
 from arapp.render.gpu import GpuLines, GpuMesh, box_corners
+from arapp.render.gpu_cache import GpuCache
 from arapp.render.gl import RendererError, create_context, release_context
 from tracking.camera import Camera
 from tracking.errors import CalibrationError
 
-_MESH_CACHE_SIZE = 16
-#: framebuffers are sized to the crop, rounded up to this many output pixels per axis, so that a model
-#: moving a little does not reallocate them every frame
-_FBO_STEP = 16
-_LINESET_CACHE_SIZE = 64
+
 
 
 def _same_key(a, b) -> bool:
@@ -105,17 +102,16 @@ class OverlayRenderer:
         self.samples = max(0, min(int(self._samples_request), max_samples)) if antialias == "msaa" else 0
         self.ss = float(self._supersample) if antialias == "ssaa" else 1.0
         self.cull = True  # back-face culling of closed meshes (switchable for comparisons)
-        self._fbo = self._resolve = None
-        self._fbo_size = (0, 0)
-        # sized to the crop on each draw (see _fit_framebuffers): a framebuffer much larger than what is
+        # sized to the crop on each draw (see CropFramebuffers.fit): a framebuffer much larger than what is
         # drawn costs a CPU rasteriser per frame (clearing, binning) even outside the scissor box
-        self._alloc_framebuffers(min(self.width, 8 * _FBO_STEP), min(self.height, 8 * _FBO_STEP))
+        self._framebuffers = CropFramebuffers(GL, self.samples, self.ss, software, self._und_limits,
+                                              min(self.width, 8 * FBO_STEP), min(self.height, 8 * FBO_STEP))
         self._readback = None  # reused read-back buffer of the supersampled crop
         self._memo = None  # (key, last crop): see _render_crop
         self._read_depth, self._last_depth = False, None  # the model's depth, read once an occlusion asks
         self._lines_cache: OrderedDict[tuple, tuple] = OrderedDict()  # see _collect_lines
-        self._meshes: OrderedDict[int, GpuMesh] = OrderedDict()
-        self._linesets: OrderedDict[int, tuple[weakref.ref, GpuLines]] = OrderedDict()
+        self._gpu = GpuCache(GL)
+        self._meshes, self._linesets = self._gpu.meshes, self._gpu.linesets  # the cache's, for inspection
 
     def _make_current(self) -> None:
         """Make this renderer's context current, rebuilding it if it was lost.
@@ -192,17 +188,11 @@ class OverlayRenderer:
         try:
             self._platform.make_current()
         except Exception:  # noqa: BLE001 - context already lost (see _make_current): nothing left to free
-            self._meshes.clear()
-            self._linesets.clear()
+            self._gpu.clear()
             return
         try:
-            for g in self._meshes.values():
-                g.delete()
-            for _, g in self._linesets.values():
-                g.delete()
-            self._meshes.clear()
-            self._linesets.clear()
-            self._free_framebuffers()
+            self._gpu.delete_all()
+            self._framebuffers.free()
             for prog, _ in (self._surface_prog, self._line_prog, self._shadow_prog):
                 self.GL.glDeleteProgram(prog)
         finally:
@@ -233,117 +223,14 @@ class OverlayRenderer:
         y1 = int(np.ceil(min(my[fin].max(), 2 * H))) + 2
         return x0, y0, x1 - x0 + 1, y1 - y0 + 1
 
-    def _alloc_framebuffers(self, w: int, h: int) -> None:
-        GL = self.GL
-        self._free_framebuffers()
-        max_rb = int(int(GL.glGetIntegerv(GL.GL_MAX_RENDERBUFFER_SIZE)) / self.ss)
-        w, h = min(w, max_rb), min(h, max_rb)
-        self._fbo_max = max_rb
-        self._fbo_size = (w, h)  # in output pixels; the buffers hold ss times that
-        w, h = int(np.ceil(w * self.ss)), int(np.ceil(h * self.ss))
-
-        def fbo(samples):
-            fb = GL.glGenFramebuffers(1)
-            GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, fb)
-            color, depth = GL.glGenRenderbuffers(2)
-            GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, color)
-            GL.glRenderbufferStorageMultisample(GL.GL_RENDERBUFFER, samples, GL.GL_RGBA8, w, h)
-            GL.glFramebufferRenderbuffer(GL.GL_FRAMEBUFFER, GL.GL_COLOR_ATTACHMENT0, GL.GL_RENDERBUFFER, color)
-            GL.glBindRenderbuffer(GL.GL_RENDERBUFFER, depth)
-            GL.glRenderbufferStorageMultisample(GL.GL_RENDERBUFFER, samples, GL.GL_DEPTH_COMPONENT24, w, h)
-            GL.glFramebufferRenderbuffer(GL.GL_FRAMEBUFFER, GL.GL_DEPTH_ATTACHMENT, GL.GL_RENDERBUFFER, depth)
-            status = GL.glCheckFramebufferStatus(GL.GL_FRAMEBUFFER)
-            if status != GL.GL_FRAMEBUFFER_COMPLETE:
-                raise RendererError(f"offscreen framebuffer {w}x{h} (samples={samples}) incomplete: 0x{int(status):x}")
-            return fb, [color, depth]
-
-        self._fbo = fbo(self.samples)
-        self._resolve = fbo(0) if self.samples > 0 else None
-        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
-
-    def _fit_framebuffers(self, w: int, h: int) -> tuple[int, int]:
-        """Make the framebuffers hold a w x h crop (output pixels) without being much larger; returns
-        the crop size they hold (smaller only beyond the GL renderbuffer limit).
-
-        Each frame clears the whole framebuffers (see _render_crop_gl), which on a CPU rasteriser costs
-        in proportion to their area, and reallocating them costs little (measured on llvmpipe with the
-        bench's 720p torus: a framebuffer fitted to every crop anew beat one with 1.5x room per axis).
-        So there they grow to 5 % beyond the crop and shrink once they hold 1.5 times its area. On a GPU
-        clearing is nearly free and a reallocation may stall the driver: 1.5x room, shrink at 4x the area.
-        """
-        room, shrink = (1.05, 1.5) if self._software else (1.5, 4.0)
-        fw, fh = self._fbo_size
-        mx = self._fbo_max  # beyond the GL limit the crop is cut, not the framebuffer grown
-        too_small = (w > fw and fw < mx) or (h > fh and fh < mx)
-        if too_small or fw * fh > shrink * w * h:
-            if not too_small:
-                fw = fh = 0  # shrinking: size to this crop alone
-
-            def size(n, limit):  # with room, but not beyond the largest possible crop
-                n = min(int(n * room), max(limit, n))
-                return -(-n // _FBO_STEP) * _FBO_STEP
-
-            self._alloc_framebuffers(size(max(w, fw), self._und_limits[2]), size(max(h, fh), self._und_limits[3]))
-            fw, fh = self._fbo_size
-        return min(w, fw), min(h, fh)
-
-    def _free_framebuffers(self) -> None:
-        GL = self.GL
-        for f in (self._fbo, getattr(self, "_resolve", None)):
-            if f is not None:
-                GL.glDeleteFramebuffers(1, [f[0]])
-                GL.glDeleteRenderbuffers(2, f[1])
-        self._fbo = self._resolve = None
-
     # -- caches ------------------------------------------------------------------------------
     def _gpu_mesh(self, mesh) -> GpuMesh:
-        """The cached GPU copy of `mesh` (keyed by identity; rebuilt when its data hash changes)."""
-        self._drop_dead()
-        key = id(mesh)
-        version = hash(mesh)  # trimesh caches this until the arrays are modified
-        g = self._meshes.get(key)
-        if g is not None and g.ref() is mesh and g.version == version:
-            self._meshes.move_to_end(key)
-            return g
-        if g is not None:
-            g.delete()
-            del self._meshes[key]
-        if len(mesh.faces) == 0:
-            raise ValueError("mesh has no faces to draw")
-        g = GpuMesh(self.GL, mesh, version)
-        self._meshes[key] = g
-        while len(self._meshes) > _MESH_CACHE_SIZE:
-            self._meshes.popitem(last=False)[1].delete()
-        return g
+        """The cached GPU copy of `mesh` (see GpuCache.mesh)."""
+        return self._gpu.mesh(mesh)
 
     def _gpu_lineset(self, ls: modes.LineSet, persistent: bool) -> GpuLines:
-        if not persistent:
-            return GpuLines(self.GL, ls.segments())
-        key = id(ls)
-        entry = self._linesets.get(key)
-        if entry is not None and entry[0]() is ls:
-            self._linesets.move_to_end(key)
-            return entry[1]
-        if entry is not None:
-            entry[1].delete()
-        g = GpuLines(self.GL, ls.segments())
-        self._linesets[key] = (weakref.ref(ls), g)
-        return g
-
-    def _trim_linesets(self, in_use: set) -> None:
-        """Keep at most _LINESET_CACHE_SIZE line sets on the GPU, never evicting those drawn this frame."""
-        for key in list(self._linesets):
-            if len(self._linesets) <= _LINESET_CACHE_SIZE:
-                break
-            if key not in in_use:
-                self._linesets.pop(key)[1].delete()
-
-    def _drop_dead(self) -> None:
-        """Free GPU copies of meshes and line sets that have been garbage collected."""
-        for key in [k for k, g in self._meshes.items() if g.ref() is None]:
-            self._meshes.pop(key).delete()
-        for key in [k for k, (r, _) in self._linesets.items() if r() is None]:
-            self._linesets.pop(key)[1].delete()
+        """The GPU copy of `ls` (see GpuCache.lineset)."""
+        return self._gpu.lineset(ls, persistent)
 
     # -- frame -------------------------------------------------------------------------------
     def _collect_lines(self, mode, lines, line_sets):
@@ -423,21 +310,66 @@ class OverlayRenderer:
         return result
 
     def _render_crop_gl(self, mesh, T, mode, line_list, color, rgba, shadow):
+        """Draw one frame's crop on the GPU: the steps of the module docstring, in order."""
         self._make_current()
-        GL = self.GL
+        gmesh, line_items, shadow_quad = self._upload(mesh, mode, line_list, color, rgba, shadow)
+        # 1. bounds of everything drawn, near/far
+        fit = self._fit_depth(T, gmesh, line_items, shadow_quad)
+        if fit is None:
+            return None
+        near, far, pc = fit
+        # 2. pixel crop in the undistorted image, then in the output image
+        crops = self._fit_crop(pc, near, line_items)
+        if crops is None:
+            return None
+        crop, out_crop = crops
+        w, h = crop[2], crop[3]
+        # 3. draw; with supersampling the same crop (same P) is drawn into ss times as many pixels
+        P = projection.gl_projection(self.K, crop, near, far)
+        MV = projection.gl_view(T)
+        sw, sh = int(round(w * self.ss)), int(round(h * self.ss))
+        self._begin_frame(sw, sh)
+        mv32 = np.ascontiguousarray(MV, np.float32)
+        p32 = np.ascontiguousarray(P, np.float32)
+        if shadow_quad is not None:
+            self._draw_shadow(shadow_quad, mv32, p32)
+        if gmesh is not None:
+            # culling is exact only when the whole mesh is in front of the near plane: a camera inside
+            # the mesh, or a near plane cutting it, must see the inner (back) faces
+            hull_z = gmesh.hull @ T[2, :3] + T[2, 3]
+            cull = self.cull and gmesh.closed and bool(hull_z.min() > near)
+            self._draw_surface(gmesh, MV, mv32, p32, rgba, modes.SURFACE_ALPHA[mode] * rgba[3], cull)
+        if line_items:
+            self._draw_lines(line_items, mv32, p32, (sw, sh), near, (w, h), self._stack_ranges(line_items, T, near))
+        # 4. read back (resolve MSAA first), downsample, distort
+        buf = self._read_back(sw, sh, w, h)
+        if self._read_depth:  # for occlusion: the model's depth on the same pixels as the crop
+            self._last_depth = occlusion_mod.read_model_depth(self, (sw, sh), crop, out_crop, near, far)
+        if (sw, sh) != (w, h):
+            # exact area-weighted downsample (premultiplied, so colours average correctly)
+            buf = cv2.resize(buf, (w, h), interpolation=cv2.INTER_AREA)
+        return self._distort(buf, crop, out_crop)
 
+    def _upload(self, mesh, mode, line_list, color, rgba, shadow):
+        """The GPU copies drawn this frame: (GpuMesh or None, [(LineSet, GpuLines)], shadow quad or None).
+
+        In wireframe mode the mesh's edges come first among the line sets."""
         gmesh = self._gpu_mesh(mesh) if mesh is not None else None
         line_items = [
             (ls, self._gpu_lineset(ls, persistent))
             for ls, persistent in line_list
         ]
-        self._trim_linesets({id(ls) for ls, persistent in line_list if persistent})
+        self._gpu.trim_linesets({id(ls) for ls, persistent in line_list if persistent})
         if gmesh is not None and mode == "wireframe":
             edge_set = modes.LineSet([], modes.WIRE_COLOR if color is None else rgba[:3] + (1.0,), 1.0, 0.0)
             line_items.insert(0, (edge_set, gmesh.edge_lines()))
         shadow_quad = gmesh.shadow_quad() if (gmesh is not None and shadow) else None
+        return gmesh, line_items, shadow_quad
 
-        # 1. bounds of everything drawn, in the model frame
+    @staticmethod
+    def _fit_depth(T, gmesh, line_items, shadow_quad):
+        """(near, far, bound points in the camera frame (n, 3)) of everything drawn, or None when nothing
+        is drawn or all of it is behind the camera."""
         pts, los, his = [], [], []
         if gmesh is not None:
             pts.append(gmesh.hull)
@@ -463,8 +395,11 @@ class OverlayRenderer:
         if cam_center[2] + radius * scale < min_near:
             return None  # entirely behind the camera
         pc = np.concatenate(pts) @ T[:3, :3].T + T[:3, 3]
+        return near, far, pc
 
-        # 2. pixel crop in the undistorted image, then in the output image
+    def _fit_crop(self, pc, near, line_items):
+        """(crop in the undistorted image, crop in the output image), each (x0, y0, w, h) pixels, or None
+        when nothing shows; the framebuffers are fitted to the first (which they may cut)."""
         bounds = projection.pixel_bounds(pc, self.K, near)
         if bounds is None:
             return None
@@ -481,18 +416,15 @@ class OverlayRenderer:
                 return None
         else:
             out_crop = crop
-        w, h = self._fit_framebuffers(crop[2], crop[3])
-        crop = (crop[0], crop[1], w, h)
+        w, h = self._framebuffers.fit(crop[2], crop[3])
+        return (crop[0], crop[1], w, h), out_crop
 
-        # 3. draw
-        P = projection.gl_projection(self.K, crop, near, far)
-        MV = projection.gl_view(T)
-        # with supersampling the same crop (same P) is drawn into ss times as many pixels
-        ss = self.ss
-        sw, sh = int(round(w * ss)), int(round(h * ss))
-        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self._fbo[0])
+    def _begin_frame(self, sw: int, sh: int) -> None:
+        """Bind the framebuffer, clear it and set the GL state every draw starts from."""
+        GL = self.GL
+        GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, self._framebuffers.fbo[0])
         GL.glViewport(0, 0, sw, sh)
-        # the framebuffers are sized to the crop (_fit_framebuffers), so the whole of them is cleared: a
+        # the framebuffers are sized to the crop (CropFramebuffers.fit), so the whole of them is cleared: a
         # scissored clear is drawn as a quad through the fragment pipeline, a full one is a plain fill
         GL.glDisable(GL.GL_SCISSOR_TEST)
         GL.glClearColor(0.0, 0.0, 0.0, 0.0)
@@ -508,56 +440,48 @@ class OverlayRenderer:
         GL.glBlendFunc(GL.GL_ONE, GL.GL_ONE_MINUS_SRC_ALPHA)
         if self.samples > 0:
             GL.glEnable(GL.GL_MULTISAMPLE)
-        mv32 = np.ascontiguousarray(MV, np.float32)
-        p32 = np.ascontiguousarray(P, np.float32)
 
-        if shadow_quad is not None:
-            prog, u = self._shadow_prog
-            GL.glUseProgram(prog)
-            GL.glUniformMatrix4fv(u["u_mv"], 1, GL.GL_TRUE, mv32)
-            GL.glUniformMatrix4fv(u["u_proj"], 1, GL.GL_TRUE, p32)
-            GL.glUniform1f(u["u_opacity"], 0.45)
-            GL.glActiveTexture(GL.GL_TEXTURE0)
-            GL.glBindTexture(GL.GL_TEXTURE_2D, shadow_quad[1])
-            GL.glUniform1i(u["u_tex"], 0)
-            GL.glDepthMask(GL.GL_FALSE)
-            GL.glDepthFunc(GL.GL_LEQUAL)
-            shadow_quad[0].draw(GL.GL_TRIANGLES)
-            GL.glDepthMask(GL.GL_TRUE)
+    def _draw_shadow(self, shadow_quad, mv32, p32) -> None:
+        """The soft contact shadow: a textured quad on z = 0, blended without writing depth."""
+        GL = self.GL
+        prog, u = self._shadow_prog
+        GL.glUseProgram(prog)
+        GL.glUniformMatrix4fv(u["u_mv"], 1, GL.GL_TRUE, mv32)
+        GL.glUniformMatrix4fv(u["u_proj"], 1, GL.GL_TRUE, p32)
+        GL.glUniform1f(u["u_opacity"], 0.45)
+        GL.glActiveTexture(GL.GL_TEXTURE0)
+        GL.glBindTexture(GL.GL_TEXTURE_2D, shadow_quad[1])
+        GL.glUniform1i(u["u_tex"], 0)
+        GL.glDepthMask(GL.GL_FALSE)
+        GL.glDepthFunc(GL.GL_LEQUAL)
+        shadow_quad[0].draw(GL.GL_TRIANGLES)
+        GL.glDepthMask(GL.GL_TRUE)
 
-        if gmesh is not None:
-            # culling is exact only when the whole mesh is in front of the near plane: a camera inside
-            # the mesh, or a near plane cutting it, must see the inner (back) faces
-            hull_z = gmesh.hull @ T[2, :3] + T[2, 3]
-            cull = self.cull and gmesh.closed and bool(hull_z.min() > near)
-            self._draw_surface(gmesh, MV, mv32, p32, rgba, modes.SURFACE_ALPHA[mode] * rgba[3], cull)
-        if line_items:
-            self._draw_lines(line_items, mv32, p32, (sw, sh), near, (w, h), self._stack_ranges(line_items, T, near))
-
-        # 4. read back (resolve MSAA first)
-        if self._resolve is not None:
-            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._fbo[0])
-            GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, self._resolve[0])
+    def _read_back(self, sw: int, sh: int, w: int, h: int) -> np.ndarray:
+        """The drawn (sh, sw, 4) premultiplied RGBA, MSAA resolved first. Supersampled (sw, sh) != (w, h):
+        a view of a reused buffer (to be downsampled); else a new array (returned and memoised as it is)."""
+        GL = self.GL
+        fb = self._framebuffers
+        if fb.resolve is not None:
+            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, fb.fbo[0])
+            GL.glBindFramebuffer(GL.GL_DRAW_FRAMEBUFFER, fb.resolve[0])
             GL.glDisable(GL.GL_SCISSOR_TEST)
             GL.glBlitFramebuffer(0, 0, sw, sh, 0, 0, sw, sh, GL.GL_COLOR_BUFFER_BIT, GL.GL_NEAREST)
-            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, self._resolve[0])
+            GL.glBindFramebuffer(GL.GL_READ_FRAMEBUFFER, fb.resolve[0])
         GL.glPixelStorei(GL.GL_PACK_ALIGNMENT, 1)
         if (sw, sh) != (w, h):
-            # read into a reused buffer; the downsample below makes the crop that is kept
             rb = self._readback
             if rb is None or rb.size < sw * sh * 4:
                 rb = self._readback = np.empty(sw * sh * 4, np.uint8)
             buf = rb[:sw * sh * 4].reshape(sh, sw, 4)
         else:
-            buf = np.empty((sh, sw, 4), np.uint8)  # returned (and memoised) as it is
+            buf = np.empty((sh, sw, 4), np.uint8)
         GL.glReadPixels(0, 0, sw, sh, GL.GL_RGBA, GL.GL_UNSIGNED_BYTE, buf)
         GL.glBindFramebuffer(GL.GL_FRAMEBUFFER, 0)
-        if self._read_depth:  # for occlusion: the model's depth on the same pixels as the crop
-            self._last_depth = occlusion_mod.read_model_depth(self, (sw, sh), crop, out_crop, near, far)
-        if (sw, sh) != (w, h):
-            # exact area-weighted downsample (premultiplied, so colours average correctly)
-            buf = cv2.resize(buf, (w, h), interpolation=cv2.INTER_AREA)
+        return buf
 
+    def _distort(self, buf, crop, out_crop):
+        """(crop, x0, y0) in the output image: `buf` as it is, or warped through the lens distortion."""
         if not self._distorted:
             # the crop lies inside the image (the undistorted limits are the image)
             return buf, crop[0], crop[1]
@@ -647,18 +571,4 @@ class OverlayRenderer:
         # parts behind the surface first (dimmed), then the visible parts, which also occlude each other
         pass_(GL.GL_GREATER, lambda ls: ls.hidden_alpha, False)
         pass_(GL.GL_LEQUAL, lambda ls: 1.0, True)
-        self._free_transient(items)
-
-    def _cached_line_buffers(self):
-        for _, g in self._linesets.values():
-            yield g
-        for m in self._meshes.values():
-            if m.edges is not None:
-                yield m.edges
-
-    def _free_transient(self, items):
-        """Delete the GPU buffers of line sets uploaded for this frame only."""
-        cached = {id(g) for g in self._cached_line_buffers()}
-        for _, g in items:
-            if id(g) not in cached:
-                g.delete()
+        self._gpu.free_transient(items)

@@ -153,6 +153,41 @@ def refine_poses(views, K, anchors, max_reproj_px: float = 2.0, max_nfev: int = 
     poses = [v.pose.copy() for v in views]
     tracks, kps = match_tracks(views, K)
     Ps = [K @ np.linalg.inv(T)[:3] for T in poses]
+    pts, obs_v, obs_p, obs_uv = _track_points(tracks, kps, Ps, max_reproj_px, min_track)
+    marks = _marker_observations(views, K, anchors)
+    m_v = np.concatenate([np.full(len(m[0]), i) for i, m in enumerate(marks)]).astype(int)
+    m_xyz = np.concatenate([m[0] for m in marks]) if len(m_v) else np.zeros((0, 3))
+    m_uv = np.concatenate([m[1] for m in marks]) if len(m_v) else np.zeros((0, 2))
+    nv, npnt = len(views), len(pts)
+    cfw = [np.linalg.inv(T) for T in poses]
+    x0 = np.concatenate([np.concatenate([Rotation.from_matrix(c[:3, :3]).as_rotvec(), c[:3, 3]]) for c in cfw]
+                        + [pts.ravel()])
+
+    def residuals(x):
+        cam = x[:6 * nv].reshape(nv, 6)
+        X = x[6 * nv:].reshape(npnt, 3)
+        r1 = (_project(K, cam[obs_v, :3], cam[obs_v, 3:], X[obs_p]) - obs_uv).ravel()
+        r2 = (_project(K, cam[m_v, :3], cam[m_v, 3:], m_xyz) - m_uv).ravel() * MARKER_WEIGHT
+        return np.concatenate([r1, r2])
+
+    r0 = residuals(x0)
+    rms0 = float(np.sqrt(np.mean(r0[:2 * len(obs_v)] ** 2))) if len(obs_v) else 0.0
+    if len(obs_v) + len(m_v) < 6 * nv:
+        return Refinement(poses, pts, rms0, rms0, 0.0, 0.0, npnt, len(m_v))
+    S = _jacobian_sparsity(nv, x0.size, obs_v, obs_p, m_v)
+    sol = least_squares(residuals, x0, jac_sparsity=S.tocsr(), method="trf", loss="huber", f_scale=1.0,
+                        x_scale="jac", max_nfev=max_nfev)
+    r1 = residuals(sol.x)
+    rms1 = float(np.sqrt(np.mean(r1[:2 * len(obs_v)] ** 2))) if len(obs_v) else 0.0
+    new, moved, turned = _poses_from_params(sol.x[:6 * nv].reshape(nv, 6), poses)
+    return Refinement(new, sol.x[6 * nv:].reshape(-1, 3), rms0, rms1, float(np.mean(moved)),
+                      float(np.mean(turned)), npnt, len(m_v))
+
+
+def _track_points(tracks, kps, Ps, max_reproj_px: float, min_track: int):
+    """The tracks seen in at least `min_track` views, triangulated from the views' projections `Ps` and kept
+    when in front of every camera within `max_reproj_px`: (points (n, 3), observation view indices, point
+    indices, pixels (m, 2))."""
     pts, obs_v, obs_p, obs_uv = [], [], [], []
     for tr in tracks:
         if len(tr) < min_track:   # two-view tracks add many unknowns and little constraint
@@ -172,26 +207,15 @@ def refine_poses(views, K, anchors, max_reproj_px: float = 2.0, max_nfev: int = 
             obs_p.append(len(pts))
             obs_uv.append(uv)
         pts.append(X)
-    marks = _marker_observations(views, K, anchors)
-    m_v = np.concatenate([np.full(len(m[0]), i) for i, m in enumerate(marks)]).astype(int)
-    m_xyz = np.concatenate([m[0] for m in marks]) if len(m_v) else np.zeros((0, 3))
-    m_uv = np.concatenate([m[1] for m in marks]) if len(m_v) else np.zeros((0, 2))
-    pts = np.array(pts).reshape(-1, 3)
-    obs_v, obs_p, obs_uv = np.array(obs_v, int), np.array(obs_p, int), np.array(obs_uv).reshape(-1, 2)
-    nv, npnt = len(views), len(pts)
-    cfw = [np.linalg.inv(T) for T in poses]
-    x0 = np.concatenate([np.concatenate([Rotation.from_matrix(c[:3, :3]).as_rotvec(), c[:3, 3]]) for c in cfw]
-                        + [pts.ravel()])
+    return (np.array(pts).reshape(-1, 3), np.array(obs_v, int), np.array(obs_p, int),
+            np.array(obs_uv).reshape(-1, 2))
 
-    def residuals(x):
-        cam = x[:6 * nv].reshape(nv, 6)
-        X = x[6 * nv:].reshape(npnt, 3)
-        r1 = (_project(K, cam[obs_v, :3], cam[obs_v, 3:], X[obs_p]) - obs_uv).ravel()
-        r2 = (_project(K, cam[m_v, :3], cam[m_v, 3:], m_xyz) - m_uv).ravel() * MARKER_WEIGHT
-        return np.concatenate([r1, r2])
 
+def _jacobian_sparsity(nv: int, n_params: int, obs_v, obs_p, m_v):
+    """Which parameters each residual depends on (lil_matrix): a track pixel on its view's 6 pose
+    parameters and its point's 3, a marker corner pixel on its view's pose only."""
     n_res = 2 * (len(obs_v) + len(m_v))
-    S = lil_matrix((n_res, x0.size), dtype=np.uint8)
+    S = lil_matrix((n_res, n_params), dtype=np.uint8)
     rows = np.arange(len(obs_v))
     for k in range(2):
         for c in range(6):
@@ -202,18 +226,14 @@ def refine_poses(views, K, anchors, max_reproj_px: float = 2.0, max_nfev: int = 
     for k in range(2):
         for c in range(6):
             S[rows + k, 6 * m_v + c] = 1
-    r0 = residuals(x0)
-    rms0 = float(np.sqrt(np.mean(r0[:2 * len(obs_v)] ** 2))) if len(obs_v) else 0.0
-    if len(obs_v) + len(m_v) < 6 * nv:
-        return Refinement(poses, pts, rms0, rms0, 0.0, 0.0, npnt, len(m_v))
-    sol = least_squares(residuals, x0, jac_sparsity=S.tocsr(), method="trf", loss="huber", f_scale=1.0,
-                        x_scale="jac", max_nfev=max_nfev)
-    r1 = residuals(sol.x)
-    rms1 = float(np.sqrt(np.mean(r1[:2 * len(obs_v)] ** 2))) if len(obs_v) else 0.0
-    cam = sol.x[:6 * nv].reshape(nv, 6)
-    new = []
-    moved, turned = [], []
-    for i in range(nv):
+    return S
+
+
+def _poses_from_params(cam, poses):
+    """(world_from_camera 4x4s from the (nv, 6) rotation-vector + translation camera_from_world
+    parameters, metres each moved from `poses`, degrees each turned)."""
+    new, moved, turned = [], [], []
+    for i in range(len(cam)):
         c = np.eye(4)
         c[:3, :3] = Rotation.from_rotvec(cam[i, :3]).as_matrix()
         c[:3, 3] = cam[i, 3:]
@@ -221,5 +241,4 @@ def refine_poses(views, K, anchors, max_reproj_px: float = 2.0, max_nfev: int = 
         moved.append(np.linalg.norm(T[:3, 3] - poses[i][:3, 3]))
         turned.append(np.degrees(Rotation.from_matrix(T[:3, :3] @ poses[i][:3, :3].T).magnitude()))
         new.append(T)
-    return Refinement(new, sol.x[6 * nv:].reshape(-1, 3), rms0, rms1, float(np.mean(moved)),
-                      float(np.mean(turned)), npnt, len(m_v))
+    return new, moved, turned

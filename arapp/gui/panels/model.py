@@ -81,7 +81,17 @@ class ModelPanel(QWidget):
         super().__init__(parent)
         lay = QVBoxLayout(self)
         lay.setContentsMargins(4, 4, 4, 4)
+        self._build_library(lay)
+        self._build_placement(lay)
+        self._build_control_point(lay)
+        self._quiet = False
+        self._surfaces = []
+        self._tilt = (0.0, 0.0)
+        self.set_placement(Placement())
+        self.set_model_loaded(False)
 
+    def _build_library(self, lay) -> None:
+        """The models/ library list, Open and Print buttons and the loaded model's name."""
         self.library = QListWidget()
         # a list, thumbnail left and the whole name right: an icon grid cut long names off
         self.library.setViewMode(QListView.ViewMode.ListMode)
@@ -106,6 +116,8 @@ class ModelPanel(QWidget):
         self.current.setWordWrap(True)
         lay.addWidget(self.current)
 
+    def _build_placement(self, lay) -> None:
+        """Size, offset, rotation, display mode and occlusion of the model on the anchor."""
         place = QGroupBox("Placement on the anchor")
         self.place_box = place
         pf = QFormLayout(place)
@@ -133,6 +145,8 @@ class ModelPanel(QWidget):
             s.valueChanged.connect(self._placement_edited)
         lay.addWidget(place)
 
+    def _build_control_point(self, lay) -> None:
+        """The NURBS control point picked (surface, u, v) with its weight and position."""
         edit = QGroupBox("Control point (NURBS)")
         ef = QFormLayout(edit)
         self.surface_index = QSpinBox()
@@ -159,11 +173,6 @@ class ModelPanel(QWidget):
         self.edit_box = edit
         edit.setEnabled(False)
         lay.addWidget(edit)
-        self._quiet = False
-        self._surfaces = []
-        self._tilt = (0.0, 0.0)
-        self.set_placement(Placement())
-        self.set_model_loaded(False)
 
     def set_model_loaded(self, loaded: bool) -> None:
         """Placement and Print act only on a loaded model."""

@@ -69,6 +69,26 @@ class BedAnchorDialog(QDialog):
         self.profile_choice = profile_choice
         self.saved_path: Path | None = None
         form = QFormLayout()
+        self._add_marker_rows(form)
+        self._add_where_rows(form)
+        self._add_centre_rows(form)
+        self._add_touch_rows(form)
+        self.message = QLabel("")
+        self.message.setWordWrap(True)
+        buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Save | QDialogButtonBox.StandardButton.Cancel)
+        buttons.accepted.connect(self.save)
+        buttons.rejected.connect(self.reject)
+        self.save_button = buttons.button(QDialogButtonBox.StandardButton.Save)
+        lay = QVBoxLayout(self)
+        lay.addLayout(form)
+        lay.addWidget(self.message)
+        lay.addWidget(buttons)
+        self.centre_radio.toggled.connect(self._how_changed)
+        self._prefill()
+        self._how_changed()
+
+    def _add_marker_rows(self, form) -> None:
+        """Which marker: dictionary, id and printed side."""
         self.dictionary = QComboBox()
         for name in aruco_dictionary_names():
             self.dictionary.addItem(name)
@@ -79,6 +99,8 @@ class BedAnchorDialog(QDialog):
         form.addRow("Marker id", self.marker_id)
         form.addRow("Marker side", self.length)
 
+    def _add_where_rows(self, form) -> None:
+        """How its place is given: centre coordinates, or two corners touched with the nozzle."""
         self.centre_radio = QRadioButton("Marker centre on the bed")
         self.touch_radio = QRadioButton("Nozzle touched two corners")
         group = QButtonGroup(self)
@@ -90,6 +112,8 @@ class BedAnchorDialog(QDialog):
         row.addWidget(self.touch_radio)
         form.addRow("Where", row)
 
+    def _add_centre_rows(self, form) -> None:
+        """The marker's centre on the bed (mm) and its turn about z (degrees)."""
         self.centre_box = QWidget()
         cf = QFormLayout(self.centre_box)
         cf.setContentsMargins(0, 0, 0, 0)
@@ -104,6 +128,8 @@ class BedAnchorDialog(QDialog):
         cf.addRow("Turn about z", self.rotation)
         form.addRow(self.centre_box)
 
+    def _add_touch_rows(self, form) -> None:
+        """The nozzle's X, Y (mm) on the marker's bottom-left and bottom-right corners."""
         self.touch_box = QWidget()
         tf = QFormLayout(self.touch_box)
         tf.setContentsMargins(0, 0, 0, 0)
@@ -118,20 +144,6 @@ class BedAnchorDialog(QDialog):
         hint.setWordWrap(True)
         tf.addRow(hint)
         form.addRow(self.touch_box)
-
-        self.message = QLabel("")
-        self.message.setWordWrap(True)
-        buttons = QDialogButtonBox(QDialogButtonBox.StandardButton.Save | QDialogButtonBox.StandardButton.Cancel)
-        buttons.accepted.connect(self.save)
-        buttons.rejected.connect(self.reject)
-        self.save_button = buttons.button(QDialogButtonBox.StandardButton.Save)
-        lay = QVBoxLayout(self)
-        lay.addLayout(form)
-        lay.addWidget(self.message)
-        lay.addWidget(buttons)
-        self.centre_radio.toggled.connect(self._how_changed)
-        self._prefill()
-        self._how_changed()
 
     def _how_changed(self, *_args) -> None:
         self.centre_box.setVisible(self.centre_radio.isChecked())

@@ -174,43 +174,55 @@ class OctoPrintLink(PrintLink):
                 self.cancel()
             if self._cancel_req.is_set():
                 cancelling = True
-            job = self._request("GET", "/api/job").json()
-            self._read_temperatures()
+            job, ours, completion, prog = self._poll_job(state, (uploaded, name), offsets, layers)
             text = str(job.get("state", ""))
             low = text.lower()
-            file_name = ((job.get("job") or {}).get("file") or {}).get("name")
-            prog = job.get("progress") or {}
-            completion = prog.get("completion")
-            filepos = prog.get("filepos") or 0
-            ours = file_name in (uploaded, name)
             if ours and (low.startswith(("printing", "pausing", "paused", "cancelling", "finishing", "starting"))):
                 started = True
-            if ours and completion is not None:
-                # After a cancel OctoPrint reports no progress: keep the last known.
-                fraction = completion / 100.0
-                state.commands_done = int(round(fraction * state.commands_total))
-                if offsets:
-                    i = bisect.bisect_right(offsets, filepos) - 1
-                    state.layer = layers[i] if i >= 0 else -1
-            fraction = state.commands_done / state.commands_total if state.commands_total else 0.0
-            kind = PAUSED if "paus" in low else CANCELLING if cancelling or "cancel" in low else PRINTING
-            if "heat" in low:
-                kind = HEATING
             elapsed = time.monotonic() - t0
             back = low.startswith("operational") and (started or (ours and completion is not None))
             if self._job_ended(state, job, text, back, cancelling, completion, layers, progress, elapsed):
                 return state
             if progress is not None:
-                left = prog.get("printTimeLeft")
-                progress(Progress(
-                    state=kind, lines_done=state.commands_done, lines_total=state.commands_total,
-                    layer=state.layer, layer_count=state.layer_count, percent=100.0 * fraction,
-                    elapsed_s=elapsed,
-                    eta_s=float(left) if left is not None else eta(state.commands_done, state.commands_total, elapsed),
-                    temperatures=dict(self.temperatures), message=text,
-                ))
+                progress(self._progress(state, text, cancelling, prog, elapsed))
             # Wait for the next poll; cancel() from another thread wakes it early.
             (never if cancelling else self._cancel_req).wait(self.poll_interval)
+
+    def _poll_job(self, state: JobState, names: tuple, offsets: list, layers: list):
+        """(job JSON, whether it is our file (uploaded under one of `names`), completion % or None, its
+        progress block), temperatures read too; lines done and layer updated in `state` from our job's
+        progress."""
+        job = self._request("GET", "/api/job").json()
+        self._read_temperatures()
+        file_name = ((job.get("job") or {}).get("file") or {}).get("name")
+        prog = job.get("progress") or {}
+        completion = prog.get("completion")
+        filepos = prog.get("filepos") or 0
+        ours = file_name in names
+        if ours and completion is not None:
+            # After a cancel OctoPrint reports no progress: keep the last known.
+            fraction = completion / 100.0
+            state.commands_done = int(round(fraction * state.commands_total))
+            if offsets:
+                i = bisect.bisect_right(offsets, filepos) - 1
+                state.layer = layers[i] if i >= 0 else -1
+        return job, ours, completion, prog
+
+    def _progress(self, state: JobState, text: str, cancelling: bool, prog: dict, elapsed: float) -> Progress:
+        """The Progress to report for OctoPrint's state `text` and progress block `prog`."""
+        low = text.lower()
+        fraction = state.commands_done / state.commands_total if state.commands_total else 0.0
+        kind = PAUSED if "paus" in low else CANCELLING if cancelling or "cancel" in low else PRINTING
+        if "heat" in low:
+            kind = HEATING
+        left = prog.get("printTimeLeft")
+        return Progress(
+            state=kind, lines_done=state.commands_done, lines_total=state.commands_total,
+            layer=state.layer, layer_count=state.layer_count, percent=100.0 * fraction,
+            elapsed_s=elapsed,
+            eta_s=float(left) if left is not None else eta(state.commands_done, state.commands_total, elapsed),
+            temperatures=dict(self.temperatures), message=text,
+        )
 
     def _job_ended(self, state: JobState, job: dict, text: str, back: bool, cancelling: bool,
                    completion: float | None, layers: list[int], progress, elapsed: float) -> bool:
