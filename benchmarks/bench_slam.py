@@ -104,6 +104,20 @@ HELD_QUICK = ["tune_held_board"]
 HELD_MAX_M = 0.03   # issue 25: no frame of a held card placed more than 3 cm off
 
 
+
+def _run_watching(tracker, frames, watch):
+    """`run_tracker` over `frames`, and `watch(result)` of every frame's TrackResult, in order."""
+    seen = []
+    orig = tracker.process
+
+    def process(img, t):
+        res = orig(img, t)
+        seen.append(watch(res))
+        return res
+
+    tracker.process = process
+    return run_tracker(tracker, frames), seen
+
 def measure_held(name: str) -> dict:
     """The tracker and the plain peer on one held-card recording (tracking.synth.presets.HELD, rendered and
     cached by tests/scenes.py): frames placed, position errors, and the frame the tracker saw the anchors
@@ -122,16 +136,7 @@ def measure_held(name: str) -> dict:
         plain.append(np.nan if p is None else float(np.linalg.norm(p[:3, 3] - gt[:3, 3])))
     plain = np.array(plain)
     with Tracker(session.camera, session.anchors) as tr:
-        seen = []
-        orig = tr.process
-
-        def process(img, t):
-            res = orig(img, t)
-            seen.append(tr.anchors_moving)
-            return res
-
-        tr.process = process
-        r = run_tracker(tr, frames)
+        r, seen = _run_watching(tr, frames, lambda res: tr.anchors_moving)
     e = r["errors"]
     return {"name": name, "frames": len(frames), "placed": int(np.isfinite(e).sum()),
             "plain_placed": int(np.isfinite(plain).sum()), "max": float(np.nanmax(e)), "plain_max": float(np.nanmax(plain)),
@@ -207,16 +212,7 @@ def measure_headon(name: str) -> dict:
         plain.append(peer.pose(img))
         pms.append((time.perf_counter() - t0) * 1000.0)
     with Tracker(session.camera, session.anchors) as tr:
-        flags = []
-        orig = tr.process
-
-        def process(img, t):
-            res = orig(img, t)
-            flags.append(res.ambiguous)
-            return res
-
-        tr.process = process
-        r = run_tracker(tr, frames)
+        r, flags = _run_watching(tr, frames, lambda res: res.ambiguous)
     undecided = [i for i, f in enumerate(flags) if f]
     return {"name": name, "arapp": headon_errors(frames, r["poses"]), "plain": headon_errors(frames, plain),
             "undecided_s": float(frames[undecided[-1]][0] - frames[0][0]) if undecided else None,

@@ -10,12 +10,12 @@ never seen (it is built under another name and renamed when complete).
 
 from __future__ import annotations
 
-import fcntl
 import os
 import shutil
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
+
+from tracking.synth.cache import file_lock  # one lock for the recordings cache and the tests' shared builds
 
 
 def run_folder(tmp_path_factory) -> Path:
@@ -23,18 +23,6 @@ def run_folder(tmp_path_factory) -> Path:
     workers of the run share (each worker's base temp is `<run folder>/popen-gwN`)."""
     base = tmp_path_factory.getbasetemp()
     return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
-
-
-@contextmanager
-def file_lock(path: Path) -> Iterator[None]:
-    """Hold an exclusive lock (flock) on `path` (created if missing) across processes; released on exit."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a") as f:
-        fcntl.flock(f, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(f, fcntl.LOCK_UN)
 
 
 def once_per_run(tmp_path_factory, name: str, build: Callable[[Path], object]) -> Path:

@@ -120,13 +120,19 @@ def _model_entry(m: dict, i: int, scene_path: Path) -> dict:
             "anchor": int(m.get("anchor", 0))}
 
 
-def read_scene(path, camera: Camera | None = None) -> SceneFile:
-    """Read a scene file. With `camera`, refuse a scene made with another camera (size, focal length or
-    principal point more than CAMERA_TOLERANCE apart). Model paths come back absolute."""
+def _existing(path) -> Path:
+    """`path` as a Path, refused in one line when there is no such file."""
     p = Path(path)
     if not p.is_file():
         raise SceneError(f"{p}: no such scene file; save one first (GUI: File > Save scene, "
                          "replay: --save-scene)")
+    return p
+
+
+def read_scene(path, camera: Camera | None = None) -> SceneFile:
+    """Read a scene file. With `camera`, refuse a scene made with another camera (size, focal length or
+    principal point more than CAMERA_TOLERANCE apart). Model paths come back absolute."""
+    p = _existing(path)
     try:
         with zipfile.ZipFile(p) as z:
             names = set(z.namelist())
@@ -167,10 +173,7 @@ def read_scene(path, camera: Camera | None = None) -> SceneFile:
 
 def read_scene_models(path) -> list[dict]:
     """The placed models of a scene file (paths absolute), from its scene.json alone (the map is not read)."""
-    p = Path(path)
-    if not p.is_file():
-        raise SceneError(f"{p}: no such scene file; save one first (GUI: File > Save scene, "
-                         "replay: --save-scene)")
+    p = _existing(path)
     try:
         with zipfile.ZipFile(p) as z:
             doc = json.loads(z.read("scene.json"))

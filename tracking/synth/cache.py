@@ -76,7 +76,7 @@ def bundled_folder(name: str) -> Path | None:
 
 
 @contextmanager
-def _locked(path: Path) -> Iterator[None]:
+def file_lock(path: Path) -> Iterator[None]:
     """An exclusive lock on `path` across processes (flock; no lock where flock does not exist)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
@@ -102,7 +102,7 @@ def cached_recording(name: str, root: Path | None = None,
     data = preset(name)   # a clear error for an unknown name
     root = cache_root() if root is None else Path(root)
     folder = root / f"{name}-{scene_key(data)}"
-    with _locked(root / f".{name}.lock"):
+    with file_lock(root / f".{name}.lock"):
         for partial in root.glob(f".{name}-*.partial"):   # left by a process killed while rendering it
             shutil.rmtree(partial, ignore_errors=True)
         if not (folder / "groundtruth.tum").is_file():
