@@ -272,10 +272,7 @@ def solve(views: list[View], width: int, height: int, coverage: float = float("n
         img = [views[i].img.astype(np.float32).reshape(-1, 1, 2) for i in used]
         rms, K, dist, rvecs, tvecs, std_in, _, _ = cv2.calibrateCameraExtended(
             obj, img, (width, height), K0, d0, flags=run_flags)
-        per = []
-        for o, p, r, t in zip(obj, img, rvecs, tvecs):
-            proj, _ = cv2.projectPoints(o, r, t, K, dist)
-            per.append(float(np.sqrt(np.mean(np.sum((proj - p) ** 2, axis=2)))))
+        per = _view_rms(obj, img, rvecs, tvecs, K, dist)
         med = float(np.median(per))
         bad = [used[k] for k, e in enumerate(per) if e > outlier_factor * max(med, 0.05)]
         if not bad or dropped or len(used) - len(bad) < min_views:
@@ -292,16 +289,34 @@ def solve(views: list[View], width: int, height: int, coverage: float = float("n
     est = estimate_error(width, height, corners)
     result = CalibrationResult(Camera(K, dist5, width, height), float(rms), per, used, dropped, coverage, std, fixed,
                                missing, float(spread[4]), [float(x) for x in spread[:4]], [float(x) for x in est])
-    worse = [k for k in range(4) if not spread[k] < est[k]]
-    if worse:
-        k = max(worse, key=lambda j: spread[j] / est[j])
-        where = (f"add views with the board near the {', '.join(missing)} corner{'s' if len(missing) > 1 else ''} "
-                 "of the image" if missing else "add views with the board nearer the image corners, tilted, and "
-                 "at several distances")
-        f_pct = 100 * SPREAD_SIGMAS * std.get("fx", 0.0) / max(result.camera.fx, 1e-9)
-        result.refusal = (f"calibration refused: from these {len(used)} views a ray at the {CORNERS[k]} image corner "
-                          f"lands within +/-{spread[k]:.0f} px (2 sigma; fx +/-{f_pct:.1f} %), worse than the estimated "
-                          f"camera's ~{est[k]:.0f} px there; {where}, then calibrate again")
-        if refuse:
-            raise CalibrationError(result.refusal)
+    result.refusal = _refusal(result, spread, est)
+    if result.refusal is not None and refuse:
+        raise CalibrationError(result.refusal)
     return result
+
+
+def _view_rms(obj: list[np.ndarray], img: list[np.ndarray], rvecs, tvecs, K: np.ndarray,
+              dist: np.ndarray) -> list[float]:
+    """Each view's RMS reprojection error (px) under the calibrated camera."""
+    per = []
+    for o, p, r, t in zip(obj, img, rvecs, tvecs):
+        proj, _ = cv2.projectPoints(o, r, t, K, dist)
+        per.append(float(np.sqrt(np.mean(np.sum((proj - p) ** 2, axis=2)))))
+    return per
+
+
+def _refusal(result: CalibrationResult, spread: np.ndarray, est: np.ndarray) -> str | None:
+    """Why `result` is refused (which image corner a ray lands worse than the estimated camera's `est` px
+    there, given the result's `spread` px, and which views to add), or None when every corner is better."""
+    worse = [k for k in range(4) if not spread[k] < est[k]]
+    if not worse:
+        return None
+    missing, std, used = result.missing_corners, result.std, result.used
+    k = max(worse, key=lambda j: spread[j] / est[j])
+    where = (f"add views with the board near the {', '.join(missing)} corner{'s' if len(missing) > 1 else ''} "
+             "of the image" if missing else "add views with the board nearer the image corners, tilted, and "
+             "at several distances")
+    f_pct = 100 * SPREAD_SIGMAS * std.get("fx", 0.0) / max(result.camera.fx, 1e-9)
+    return (f"calibration refused: from these {len(used)} views a ray at the {CORNERS[k]} image corner "
+            f"lands within +/-{spread[k]:.0f} px (2 sigma; fx +/-{f_pct:.1f} %), worse than the estimated "
+            f"camera's ~{est[k]:.0f} px there; {where}, then calibrate again")

@@ -24,16 +24,12 @@ def run(args):
 
     from arapp.exchange.staging import staged_folder
     from tracking.synth import scene_from_arg, synthesize
-    from tracking.synth.presets import (EXTRA_TUNING, HEADON, HEADON_TEST, HELD, HELD_TEST, OCCLUSION, OCCLUSION_TEST,
-                                        PRESETS, TEST)
+    from tracking.synth.presets import PRESETS, all_presets, preset_kind
 
     if args.list or not args.scene:
-        for name, p in {**PRESETS, **EXTRA_TUNING, **HELD, **OCCLUSION, **HEADON}.items():
+        for name, p in all_presets().items():
             cam = p["camera"]
-            kind = ("test  " if name in TEST or name in HELD_TEST or name in OCCLUSION_TEST or name in HEADON_TEST
-                    else "extra " if name in EXTRA_TUNING or name in HELD or name in OCCLUSION or name in HEADON
-                    else "tuning")
-            print(f"{name:18s} {kind} {cam['width']}x{cam['height']} "
+            print(f"{name:18s} {preset_kind(name):6s} {cam['width']}x{cam['height']} "
                   f"{p['duration']:.1f} s  {', '.join(a['kind'] for a in p['anchors'])}  {p['trajectory']['kind']}")
         from tracking.synth.revisits import SETS, VARIANTS
 

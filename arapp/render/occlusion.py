@@ -40,7 +40,7 @@ MODES = ("off", "depth", "plane")
 
 @dataclass(frozen=True)
 class OcclusionParams:
-    """Tuned on the tuning recordings `tune_occlusion_*` only (tracking/synth/presets.py OCCLUSION_TUNING)."""
+    """Tuned on the tuning recordings `tune_occlusion_*` only (tracking/synth/presets/occlusion.py OCCLUSION_TUNING)."""
 
     tolerance_m: float = 0.006  # a model pixel this far behind the measured surface is still drawn
     noise_per_m2: float = 0.004  # plus this times z^2 (metres): stereo depth noise grows with the square of z

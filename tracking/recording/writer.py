@@ -14,6 +14,8 @@ import json
 import signal
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable
 
@@ -161,6 +163,52 @@ class RecordingWriter:
         return False
 
 
+@contextmanager
+def _stop_on_ctrl_c() -> Iterator[dict]:
+    """{"flag": False}, set True by Ctrl-C (SIGINT) while inside, so that a recording finishes its file instead
+    of dying mid-write; the previous handler is back on leaving. Not the main thread: Ctrl-C cannot be caught
+    there, and the flag stays False."""
+    stop = {"flag": False}
+
+    def on_sigint(signum, frame):  # finish the file instead of dying mid-write
+        stop["flag"] = True
+
+    previous = None
+    installed = False
+    try:
+        previous = signal.signal(signal.SIGINT, on_sigint)
+        installed = True
+    except ValueError:  # not the main thread: Ctrl-C cannot be caught here
+        pass
+    try:
+        yield stop
+    finally:
+        if installed:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _write_frames(source, writer: RecordingWriter, stop: dict, seconds: float | None, max_frames: int | None,
+                  progress: Callable[[str], None], depth: bool) -> int:
+    """Write the source's frames (with their depth when `depth`) until it ends, `seconds` of frame time or
+    `max_frames` have passed or `stop["flag"]` is set, telling `progress` twice a second; returns the
+    frames dropped (gaps in the source's frame indices)."""
+    dropped, last_index, wall0, last_print = 0, None, time.monotonic(), 0.0
+    for frame in source:
+        if last_index is not None and frame.index > last_index + 1:
+            dropped += frame.index - last_index - 1
+        last_index = frame.index
+        writer.write(frame.image, frame.t, depth=getattr(frame, "depth", None) if depth else None)
+        n = writer.frame_count
+        now = time.monotonic()
+        if now - last_print > 0.5:
+            last_print = now
+            rate = n / max(now - wall0, 1e-6)
+            progress(f"\rrecording {writer.folder}: {n} frames, {rate:5.1f} fps, {dropped} dropped ")
+        if stop["flag"] or (max_frames and n >= max_frames) or (seconds and writer.times[-1] >= seconds):
+            break
+    return dropped
+
+
 def record(source, folder: str | Path, anchors: list | None = None, seconds: float | None = None,
            max_frames: int | None = None, force: bool = False, fourcc: str = "MJPG", quality: int = 90,
            progress: Callable[[str], None] | None = None, depth: bool = True) -> Session:
@@ -180,39 +228,13 @@ def record(source, folder: str | Path, anchors: list | None = None, seconds: flo
     info.setdefault("kind", getattr(source, "kind", "file"))
     fps = float(getattr(source, "fps", 0) or 30.0)
     writer = RecordingWriter(folder, source.camera, fps, anchors, info, fourcc, quality, force)
-    stop = {"flag": False}
-    previous = None
     if progress is None:
         progress = lambda s: print(s, end="", file=sys.stderr, flush=True)  # noqa: E731
-
-    def on_sigint(signum, frame):  # finish the file instead of dying mid-write
-        stop["flag"] = True
-
-    installed = False
     try:
-        previous = signal.signal(signal.SIGINT, on_sigint)
-        installed = True
-    except ValueError:  # not the main thread: Ctrl-C cannot be caught here
-        pass
-    dropped, last_index, wall0, last_print = 0, None, time.monotonic(), 0.0
-    try:
-        for frame in source:
-            if last_index is not None and frame.index > last_index + 1:
-                dropped += frame.index - last_index - 1
-            last_index = frame.index
-            writer.write(frame.image, frame.t, depth=getattr(frame, "depth", None) if depth else None)
-            n = writer.frame_count
-            now = time.monotonic()
-            if now - last_print > 0.5:
-                last_print = now
-                rate = n / max(now - wall0, 1e-6)
-                progress(f"\rrecording {writer.folder}: {n} frames, {rate:5.1f} fps, {dropped} dropped ")
-            if stop["flag"] or (max_frames and n >= max_frames) or (seconds and writer.times[-1] >= seconds):
-                break
-        err = getattr(source, "error", None)
+        with _stop_on_ctrl_c() as stop:
+            dropped = _write_frames(source, writer, stop, seconds, max_frames, progress, depth)
+            err = getattr(source, "error", None)
     finally:
-        if installed:
-            signal.signal(signal.SIGINT, previous)
         session = writer.close()
     n = writer.frame_count
     with_depth = f", {writer.depth_frames} with depth" if writer.depth_frames else ""

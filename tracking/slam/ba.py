@@ -87,6 +87,151 @@ def build_problem(m: Map, newest: int, window: int = 6, scale: float = 1.2) -> B
                      np.concatenate(anc_uv) if anc_uv else np.zeros((0, 2)))
 
 
+def _project(Xc: np.ndarray, fx: float, fy: float, cx: float, cy: float) -> np.ndarray:
+    """(n,2) pixels of camera-frame points (n,3) (depth clamped to 1 um in front of the camera)."""
+    z = np.maximum(Xc[:, 2], 1e-6)
+    return np.stack([fx * Xc[:, 0] / z + cx, fy * Xc[:, 1] / z + cy], axis=1)
+
+
+def _dproject(Xc: np.ndarray, w: np.ndarray, fx: float, fy: float) -> np.ndarray:
+    """(n,2,3) derivative of the weighted projection by the camera-frame point."""
+    z = np.maximum(Xc[:, 2], 1e-6)
+    J = np.zeros((Xc.shape[0], 2, 3))
+    J[:, 0, 0] = fx / z
+    J[:, 0, 2] = -fx * Xc[:, 0] / z**2
+    J[:, 1, 1] = fy / z
+    J[:, 1, 2] = -fy * Xc[:, 1] / z**2
+    return J * w[:, None, None]
+
+
+def _dpose(Jp: np.ndarray, Xc: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(n,2,6) by the rotation increment (left, d(exp(w) R0 X) = -[R X]x dw) and translation."""
+    RX = Xc - t
+    S = np.zeros((Xc.shape[0], 3, 3))
+    S[:, 0, 1], S[:, 0, 2] = RX[:, 2], -RX[:, 1]
+    S[:, 1, 0], S[:, 1, 2] = -RX[:, 2], RX[:, 0]
+    S[:, 2, 0], S[:, 2, 1] = RX[:, 1], -RX[:, 0]
+    return np.concatenate([Jp @ S, Jp], axis=2)
+
+
+class _WindowModel:
+    """The window's least-squares model: the parameter vector's layout (per optimised keyframe a rotation
+    increment w, R = exp(w) R0, and the translation of camera_from_world; per point its world position),
+    the residuals in weighted pixels and their analytic sparse Jacobian (2 rows per observation: 6 pose + 3
+    point columns)."""
+
+    def __init__(self, problem: BAProblem, K: np.ndarray):
+        pr = self.pr = problem
+        self.nk, self.npnt = len(pr.kf_ids), pr.points.shape[0]
+        self.kidx = {k: i for i, k in enumerate(pr.kf_ids)}
+        self.R0 = np.array([pr.poses[k][:3, :3] for k in pr.kf_ids])
+        self.x0 = self._initial_vector()
+        self._observation_cameras()
+        self.fx, self.fy, self.cx, self.cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+        self.m_obs, self.m_anc = pr.obs_kf.size, self.a_slot.size
+        self._jacobian_pattern()
+
+    def _initial_vector(self) -> np.ndarray:
+        pr, nk = self.pr, self.nk
+        x0 = np.zeros(6 * nk + 3 * self.npnt)
+        for k, i in self.kidx.items():
+            x0[6 * i + 3:6 * i + 6] = pr.poses[k][:3, 3]
+        x0[6 * nk:] = pr.points.ravel()
+        return x0
+
+    def _observation_cameras(self) -> None:
+        """Every observation's camera: optimised slot i >= 0, or fixed (-1) with its pose."""
+        pr = self.pr
+        self.o_slot = np.array([self.kidx.get(int(k), -1) for k in pr.obs_kf], int)
+        self.opt = self.o_slot >= 0
+        self.a_slot = np.array([self.kidx[int(k)] for k in pr.anc_kf], int)
+        self.fixed_R = np.zeros((pr.obs_kf.size, 3, 3))
+        self.fixed_t = np.zeros((pr.obs_kf.size, 3))
+        for j, k in enumerate(pr.obs_kf):
+            if self.o_slot[j] < 0:
+                self.fixed_R[j] = pr.fixed_poses[int(k)][:3, :3]
+                self.fixed_t[j] = pr.fixed_poses[int(k)][:3, 3]
+        self.slot = np.maximum(self.o_slot, 0)
+
+    def _jacobian_pattern(self) -> None:
+        """The Jacobian's (row, column) of every nonzero, in the order jacobian() lists the values."""
+        pr, nk, m_obs, m_anc, o_slot = self.pr, self.nk, self.m_obs, self.m_anc, self.o_slot
+        self.n_rows = 2 * (m_obs + m_anc)
+        r_obs = np.repeat(np.arange(2 * m_obs).reshape(m_obs, 2), 3, axis=1).reshape(m_obs, 2, 3)
+        c_pt = (6 * nk + 3 * pr.obs_pt[:, None, None] + np.arange(3)[None, None, :]).repeat(2, axis=1)
+        oi = self.oi = np.nonzero(self.opt)[0]
+        r_po = np.repeat(np.arange(2 * m_obs).reshape(m_obs, 2)[oi], 6, axis=1).reshape(oi.size, 2, 6)
+        c_po = (6 * o_slot[oi][:, None, None] + np.arange(6)[None, None, :]).repeat(2, axis=1)
+        r_an = np.repeat((2 * m_obs + np.arange(2 * m_anc)).reshape(m_anc, 2), 6, axis=1).reshape(m_anc, 2, 6)
+        c_an = (6 * self.a_slot[:, None, None] + np.arange(6)[None, None, :]).repeat(2, axis=1)
+        self.rows = np.concatenate([r_obs.ravel(), r_po.ravel(), r_an.ravel()])
+        self.cols = np.concatenate([c_pt.ravel(), c_po.ravel(), c_an.ravel()])
+
+    def unpack(self, x):
+        nk = self.nk
+        rv = x[:6 * nk].reshape(nk, 6)
+        Rs = Rotation.from_rotvec(rv[:, :3]).as_matrix() @ self.R0
+        return Rs, rv[:, 3:], x[6 * nk:].reshape(self.npnt, 3)
+
+    def cams(self, x):
+        Rs, ts, P = self.unpack(x)
+        R = np.where(self.opt[:, None, None], Rs[self.slot], self.fixed_R)
+        t = np.where(self.opt[:, None], ts[self.slot], self.fixed_t)
+        return Rs, ts, P, R, t
+
+    def residuals(self, x):
+        pr = self.pr
+        Rs, ts, P, R, t = self.cams(x)
+        Xc = np.einsum("nij,nj->ni", R, P[pr.obs_pt]) + t
+        r1 = (_project(Xc, self.fx, self.fy, self.cx, self.cy) - pr.obs_uv) * pr.obs_w[:, None]
+        if self.m_anc:
+            Xa = np.einsum("nij,nj->ni", Rs[self.a_slot], pr.anc_xyz) + ts[self.a_slot]
+            r2 = (_project(Xa, self.fx, self.fy, self.cx, self.cy) - pr.anc_uv) * ANCHOR_WEIGHT
+            return np.concatenate([r1.ravel(), r2.ravel()])
+        return r1.ravel()
+
+    def jacobian(self, x):
+        pr, oi = self.pr, self.oi
+        Rs, ts, P, R, t = self.cams(x)
+        Xc = np.einsum("nij,nj->ni", R, P[pr.obs_pt]) + t
+        Jp = _dproject(Xc, pr.obs_w, self.fx, self.fy)
+        J_pt = Jp @ R
+        J_po = _dpose(Jp[oi], Xc[oi], t[oi])
+        parts = [J_pt.ravel(), J_po.ravel()]
+        if self.m_anc:
+            Xa = np.einsum("nij,nj->ni", Rs[self.a_slot], pr.anc_xyz) + ts[self.a_slot]
+            Ja = _dproject(Xa, np.full(self.m_anc, ANCHOR_WEIGHT), self.fx, self.fy)
+            parts.append(_dpose(Ja, Xa, ts[self.a_slot]).ravel())
+        return coo_matrix((np.concatenate(parts), (self.rows, self.cols)), shape=(self.n_rows, self.x0.size)).tocsr()
+
+    def world_from_camera(self, Rs: np.ndarray, ts: np.ndarray) -> dict:
+        """{kf id: world_from_camera} of the optimised keyframes."""
+        poses = {}
+        for k, i in self.kidx.items():
+            T = np.eye(4)
+            T[:3, :3] = Rs[i]
+            T[:3, 3] = ts[i]
+            poses[k] = invert(T)
+        return poses
+
+    def inliers(self, x) -> np.ndarray:
+        """Observations within the chi-square 95 % bound (2 dof) of their reprojection, in pixels."""
+        r = self.residuals(x)[:2 * self.m_obs].reshape(-1, 2) / self.pr.obs_w[:, None]
+        return (r**2).sum(1) < 5.991 * 2.0
+
+
+def _fit(model: _WindowModel, max_nfev: int, huber_px: float) -> np.ndarray:
+    """The optimised parameter vector."""
+    # Two stages: plain least squares pulls a perturbed window into the basin (scipy's robust
+    # losses stall from far away), then the Huber loss from there discounts outlier observations.
+    res = least_squares(model.residuals, model.x0, jac=model.jacobian, loss="linear", method="trf", x_scale="jac",
+                        max_nfev=max(2, max_nfev // 2), tr_solver="lsmr", tr_options={"maxiter": 40})
+    res = least_squares(model.residuals, res.x, jac=model.jacobian, loss="huber", f_scale=huber_px, method="trf",
+                        x_scale="jac", max_nfev=max(2, max_nfev - res.nfev), tr_solver="lsmr",
+                        tr_options={"maxiter": 40})
+    return res.x
+
+
 def solve(problem: BAProblem, K: np.ndarray, max_nfev: int = 20, huber_px: float = 2.0) -> tuple[dict, np.ndarray, np.ndarray]:
     """Optimise; returns ({kf id: world_from_camera}, point positions (P,3), inlier mask of observations).
 
@@ -94,115 +239,10 @@ def solve(problem: BAProblem, K: np.ndarray, max_nfev: int = 20, huber_px: float
     translation of camera_from_world; per point its world position. The Jacobian is
     analytic and sparse (2 rows per observation: 6 pose + 3 point columns).
     """
-    pr = problem
-    nk, npnt = len(pr.kf_ids), pr.points.shape[0]
-    kidx = {k: i for i, k in enumerate(pr.kf_ids)}
-    R0 = np.array([pr.poses[k][:3, :3] for k in pr.kf_ids])
-    x0 = np.zeros(6 * nk + 3 * npnt)
-    for k, i in kidx.items():
-        x0[6 * i + 3:6 * i + 6] = pr.poses[k][:3, 3]
-    x0[6 * nk:] = pr.points.ravel()
-
-    # every observation's camera: optimised slot i >= 0, or fixed (-1) with its pose
-    o_slot = np.array([kidx.get(int(k), -1) for k in pr.obs_kf], int)
-    opt = o_slot >= 0
-    a_slot = np.array([kidx[int(k)] for k in pr.anc_kf], int)
-    fixed_R = np.zeros((pr.obs_kf.size, 3, 3))
-    fixed_t = np.zeros((pr.obs_kf.size, 3))
-    for j, k in enumerate(pr.obs_kf):
-        if o_slot[j] < 0:
-            fixed_R[j] = pr.fixed_poses[int(k)][:3, :3]
-            fixed_t[j] = pr.fixed_poses[int(k)][:3, 3]
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    m_obs, m_anc = pr.obs_kf.size, a_slot.size
-    slot = np.maximum(o_slot, 0)
-
-    def unpack(x):
-        rv = x[:6 * nk].reshape(nk, 6)
-        Rs = Rotation.from_rotvec(rv[:, :3]).as_matrix() @ R0
-        return Rs, rv[:, 3:], x[6 * nk:].reshape(npnt, 3)
-
-    def cams(x):
-        Rs, ts, P = unpack(x)
-        R = np.where(opt[:, None, None], Rs[slot], fixed_R)
-        t = np.where(opt[:, None], ts[slot], fixed_t)
-        return Rs, ts, P, R, t
-
-    def proj(Xc):
-        z = np.maximum(Xc[:, 2], 1e-6)
-        return np.stack([fx * Xc[:, 0] / z + cx, fy * Xc[:, 1] / z + cy], axis=1)
-
-    def residuals(x):
-        Rs, ts, P, R, t = cams(x)
-        Xc = np.einsum("nij,nj->ni", R, P[pr.obs_pt]) + t
-        r1 = (proj(Xc) - pr.obs_uv) * pr.obs_w[:, None]
-        if m_anc:
-            Xa = np.einsum("nij,nj->ni", Rs[a_slot], pr.anc_xyz) + ts[a_slot]
-            r2 = (proj(Xa) - pr.anc_uv) * ANCHOR_WEIGHT
-            return np.concatenate([r1.ravel(), r2.ravel()])
-        return r1.ravel()
-
-    def dproj(Xc, w):
-        """(n,2,3) derivative of the weighted projection by the camera-frame point."""
-        z = np.maximum(Xc[:, 2], 1e-6)
-        J = np.zeros((Xc.shape[0], 2, 3))
-        J[:, 0, 0] = fx / z
-        J[:, 0, 2] = -fx * Xc[:, 0] / z**2
-        J[:, 1, 1] = fy / z
-        J[:, 1, 2] = -fy * Xc[:, 1] / z**2
-        return J * w[:, None, None]
-
-    def dpose(Jp, Xc, t):
-        """(n,2,6) by the rotation increment (left, d(exp(w) R0 X) = -[R X]x dw) and translation."""
-        RX = Xc - t
-        S = np.zeros((Xc.shape[0], 3, 3))
-        S[:, 0, 1], S[:, 0, 2] = RX[:, 2], -RX[:, 1]
-        S[:, 1, 0], S[:, 1, 2] = -RX[:, 2], RX[:, 0]
-        S[:, 2, 0], S[:, 2, 1] = RX[:, 1], -RX[:, 0]
-        return np.concatenate([Jp @ S, Jp], axis=2)
-
-    n_rows = 2 * (m_obs + m_anc)
-    r_obs = np.repeat(np.arange(2 * m_obs).reshape(m_obs, 2), 3, axis=1).reshape(m_obs, 2, 3)
-    c_pt = (6 * nk + 3 * pr.obs_pt[:, None, None] + np.arange(3)[None, None, :]).repeat(2, axis=1)
-    oi = np.nonzero(opt)[0]
-    r_po = np.repeat(np.arange(2 * m_obs).reshape(m_obs, 2)[oi], 6, axis=1).reshape(oi.size, 2, 6)
-    c_po = (6 * o_slot[oi][:, None, None] + np.arange(6)[None, None, :]).repeat(2, axis=1)
-    r_an = np.repeat((2 * m_obs + np.arange(2 * m_anc)).reshape(m_anc, 2), 6, axis=1).reshape(m_anc, 2, 6)
-    c_an = (6 * a_slot[:, None, None] + np.arange(6)[None, None, :]).repeat(2, axis=1)
-    rows = np.concatenate([r_obs.ravel(), r_po.ravel(), r_an.ravel()])
-    cols = np.concatenate([c_pt.ravel(), c_po.ravel(), c_an.ravel()])
-
-    def jacobian(x):
-        Rs, ts, P, R, t = cams(x)
-        Xc = np.einsum("nij,nj->ni", R, P[pr.obs_pt]) + t
-        Jp = dproj(Xc, pr.obs_w)
-        J_pt = Jp @ R
-        J_po = dpose(Jp[oi], Xc[oi], t[oi])
-        parts = [J_pt.ravel(), J_po.ravel()]
-        if m_anc:
-            Xa = np.einsum("nij,nj->ni", Rs[a_slot], pr.anc_xyz) + ts[a_slot]
-            Ja = dproj(Xa, np.full(m_anc, ANCHOR_WEIGHT))
-            parts.append(dpose(Ja, Xa, ts[a_slot]).ravel())
-        return coo_matrix((np.concatenate(parts), (rows, cols)), shape=(n_rows, x0.size)).tocsr()
-
-    # Two stages: plain least squares pulls a perturbed window into the basin (scipy's robust
-    # losses stall from far away), then the Huber loss from there discounts outlier observations.
-    res = least_squares(residuals, x0, jac=jacobian, loss="linear", method="trf", x_scale="jac",
-                        max_nfev=max(2, max_nfev // 2), tr_solver="lsmr", tr_options={"maxiter": 40})
-    res = least_squares(residuals, res.x, jac=jacobian, loss="huber", f_scale=huber_px, method="trf",
-                        x_scale="jac", max_nfev=max(2, max_nfev - res.nfev), tr_solver="lsmr",
-                        tr_options={"maxiter": 40})
-    x = res.x
-    Rs, ts, P = unpack(x)
-    poses = {}
-    for k, i in kidx.items():
-        T = np.eye(4)
-        T[:3, :3] = Rs[i]
-        T[:3, 3] = ts[i]
-        poses[k] = invert(T)
-    r = residuals(x)[:2 * m_obs].reshape(-1, 2) / pr.obs_w[:, None]
-    inl = (r**2).sum(1) < 5.991 * 2.0
-    return poses, P, inl
+    model = _WindowModel(problem, K)
+    x = _fit(model, max_nfev, huber_px)
+    Rs, ts, P = model.unpack(x)
+    return model.world_from_camera(Rs, ts), P, model.inliers(x)
 
 
 def local_bundle_adjustment(m: Map, newest: int, K: np.ndarray, window: int = 5, max_nfev: int = 10) -> bool:

@@ -336,6 +336,40 @@ def _seed_velocity_then(camera: Camera, xy: np.ndarray, after: np.ndarray, dt: f
     return out
 
 
+def _flow_into(camera: Camera, tracks: Tracks, gray: np.ndarray,
+               predicted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pyramidal Lucas-Kanade from `tracks.image` into `gray`, each point started where `predicted` projects
+    its world point (where it was, when that falls far outside the image): (the points in `gray` (n,2) px,
+    the mask of those followed: found, a patch error under MAX_PATCH_ERROR, inside the image)."""
+    h, w = gray.shape[:2]
+    start = camera.project_world(tracks.X, predicted).astype(np.float32)
+    inside = (start[:, 0] > -w) & (start[:, 0] < 2 * w) & (start[:, 1] > -h) & (start[:, 1] < 2 * h)
+    start = np.where(inside[:, None], start, tracks.xy)
+    nxt, st, err = cv2.calcOpticalFlowPyrLK(tracks.image, gray, tracks.xy.reshape(-1, 1, 2), start.reshape(-1, 1, 2).copy(),
+                                          winSize=WINDOW, maxLevel=LEVELS, criteria=CRITERIA,
+                                          flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
+    nxt = nxt.reshape(-1, 2)
+    ok = ((st.ravel() == 1) & (err.ravel() < MAX_PATCH_ERROR) & (nxt[:, 0] >= 0) & (nxt[:, 1] >= 0)
+          & (nxt[:, 0] <= w - 1) & (nxt[:, 1] <= h - 1))
+    return nxt, ok
+
+
+def _fit_pose(camera: Camera, predicted: np.ndarray, X: np.ndarray, und: np.ndarray,
+              need: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """(world_from_camera, inlier mask) fitted to world points X seen at undistorted pixels `und`, from
+    `predicted`, else (a poor prediction) from a RANSAC solution; None when under `need` inliers."""
+    pose, inl, _ = refine_pose(camera.K, predicted, X, und)
+    if inl.sum() < need:
+        # a poor prediction: start again from a RANSAC solution
+        guess, mask = pnp_ransac(camera.K, X, und, guess=predicted)
+        if guess is None:
+            return None
+        pose, inl, _ = refine_pose(camera.K, guess, X, und)
+        if inl.sum() < need:
+            return None
+    return pose, inl
+
+
 def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarray, min_inliers: int = 20,
            min_inlier_ratio: float = 0.6, dt: float = 0.0, lifted_from: np.ndarray | None = None,
            before: tuple[np.ndarray, float] | None = None) -> tuple[np.ndarray, Tracks] | None:
@@ -355,16 +389,7 @@ def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarr
     """
     if len(tracks) < min_inliers:
         return None
-    h, w = gray.shape[:2]
-    start = camera.project_world(tracks.X, predicted).astype(np.float32)
-    inside = (start[:, 0] > -w) & (start[:, 0] < 2 * w) & (start[:, 1] > -h) & (start[:, 1] < 2 * h)
-    start = np.where(inside[:, None], start, tracks.xy)
-    nxt, st, err = cv2.calcOpticalFlowPyrLK(tracks.image, gray, tracks.xy.reshape(-1, 1, 2), start.reshape(-1, 1, 2).copy(),
-                                          winSize=WINDOW, maxLevel=LEVELS, criteria=CRITERIA,
-                                          flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
-    nxt = nxt.reshape(-1, 2)
-    ok = ((st.ravel() == 1) & (err.ravel() < MAX_PATCH_ERROR) & (nxt[:, 0] >= 0) & (nxt[:, 1] >= 0)
-          & (nxt[:, 0] <= w - 1) & (nxt[:, 1] <= h - 1))
+    nxt, ok = _flow_into(camera, tracks, gray, predicted)
     if ok.sum() < min_inliers:
         return None
     idx = np.nonzero(ok)[0]
@@ -382,15 +407,10 @@ def follow(camera: Camera, tracks: Tracks, gray: np.ndarray, predicted: np.ndarr
     X = X_all[idx]
     seen = deskew(camera, nxt[idx], None if velocity is None else velocity[idx])
     und = camera.undistort_points(seen) if camera.has_distortion else seen
-    pose, inl, _ = refine_pose(camera.K, predicted, X, und)
-    if inl.sum() < max(min_inliers, min_inlier_ratio * idx.size):
-        # a poor prediction: start again from a RANSAC solution
-        guess, mask = pnp_ransac(camera.K, X, und, guess=predicted)
-        if guess is None:
-            return None
-        pose, inl, _ = refine_pose(camera.K, guess, X, und)
-        if inl.sum() < max(min_inliers, min_inlier_ratio * idx.size):
-            return None
+    fit = _fit_pose(camera, predicted, X, und, max(min_inliers, min_inlier_ratio * idx.size))
+    if fit is None:
+        return None
+    pose, inl = fit
     keep = idx[inl]
     moved = nxt[keep] - tracks.xy[keep]
     planar = None if tracks.planar is None else tracks.planar_mask()[keep]

@@ -38,21 +38,16 @@ def skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
 
 
-def triangulate_pair(K: np.ndarray, a: Keyframe, b: Keyframe, min_parallax_deg: float = 2.0,
-                     max_hamming: int = 50, ratio: float = 0.8, scale: float = 1.2) -> list[tuple[np.ndarray, int, int]]:
-    """New points seen by keyframes a and b: [(xyz, feature index in a, feature index in b)].
-
-    Unmatched features are paired by descriptor (ratio test), checked against the
-    epipolar line, triangulated linearly, and kept only in front of both cameras,
-    reprojecting within the chi-square bound, with parallax >= min_parallax_deg.
-    """
+def _match_unmapped(a: Keyframe, b: Keyframe, max_hamming: int, ratio: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """Features of a and b not yet on map points, paired by descriptor (ratio test), one-to-one: (indices in
+    a, indices in b); None when fewer than 8 pairs (or unmatched features) are there."""
     ia = np.nonzero(a.point_ids < 0)[0]
     ib = np.nonzero(b.point_ids < 0)[0]
     if ia.size < 8 or ib.size < 8:
-        return []
+        return None
     baseline = np.linalg.norm(a.centre - b.centre)
     if baseline < 1e-3:
-        return []
+        return None
     matcher = cv2.BFMatcher(cv2.NORM_HAMMING)
     knn = matcher.knnMatch(a.feats.desc[ia], b.feats.desc[ib], k=2)
     pa, pb = [], []
@@ -66,12 +61,17 @@ def triangulate_pair(K: np.ndarray, a: Keyframe, b: Keyframe, min_parallax_deg: 
         pa.append(ia[m[0].queryIdx])
         pb.append(ib[m[0].trainIdx])
     if len(pa) < 8:
-        return []
+        return None
     pa, pb = np.array(pa), np.array(pb)
     # one-to-one
     _, u = np.unique(pb, return_index=True)
-    pa, pb = pa[u], pb[u]
-    Ta, Tb = invert(a.pose), invert(b.pose)          # cam_from_world
+    return pa[u], pb[u]
+
+
+def _on_epipolar_lines(K: np.ndarray, a: Keyframe, b: Keyframe, pa: np.ndarray, pb: np.ndarray,
+                       scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs whose feature in b lies within 2 sigma (its octave's) of the epipolar line of its feature in a."""
+    Tb = invert(b.pose)                               # cam_from_world
     Tba = Tb @ a.pose                                 # b_from_a
     E = skew(Tba[:3, 3]) @ Tba[:3, :3]
     Kinv = np.linalg.inv(K)
@@ -82,35 +82,51 @@ def triangulate_pair(K: np.ndarray, a: Keyframe, b: Keyframe, min_parallax_deg: 
     d = np.abs((lines * xb).sum(1)) / np.maximum(np.linalg.norm(lines[:, :2], axis=1), 1e-12)
     sig = scale ** b.feats.octave[pb]
     ok = d < 2.0 * sig
-    pa, pb = pa[ok], pb[ok]
+    return pa[ok], pb[ok]
+
+
+def _keep_point(K: np.ndarray, a: Keyframe, b: Keyframe, Ta: np.ndarray, Tb: np.ndarray, X_: np.ndarray,
+                i: int, j: int, min_parallax_deg: float, scale: float) -> bool:
+    """Whether world point X_ (from features i of a and j of b) lies in front of both cameras, with
+    parallax >= min_parallax_deg, reprojecting within the chi-square bound (its octaves' sigma) in both."""
+    xa_c = Ta[:3, :3] @ X_ + Ta[:3, 3]
+    xb_c = Tb[:3, :3] @ X_ + Tb[:3, 3]
+    if xa_c[2] <= 0.02 or xb_c[2] <= 0.02:
+        return False
+    ra, rb = X_ - a.centre, X_ - b.centre
+    cosp = ra @ rb / (np.linalg.norm(ra) * np.linalg.norm(rb))
+    if cosp > np.cos(np.radians(min_parallax_deg)):
+        return False
+    ua = K[:2, :2] @ (xa_c[:2] / xa_c[2]) + K[:2, 2]
+    ub = K[:2, :2] @ (xb_c[:2] / xb_c[2]) + K[:2, 2]
+    sa, sb = scale ** a.feats.octave[i], scale ** b.feats.octave[j]
+    return not (np.sum((ua - a.feats.und[i]) ** 2) > 5.991 * sa * sa
+                or np.sum((ub - b.feats.und[j]) ** 2) > 5.991 * sb * sb)
+
+
+def triangulate_pair(K: np.ndarray, a: Keyframe, b: Keyframe, min_parallax_deg: float = 2.0,
+                     max_hamming: int = 50, ratio: float = 0.8, scale: float = 1.2) -> list[tuple[np.ndarray, int, int]]:
+    """New points seen by keyframes a and b: [(xyz, feature index in a, feature index in b)].
+
+    Unmatched features are paired by descriptor (ratio test), checked against the
+    epipolar line, triangulated linearly, and kept only in front of both cameras,
+    reprojecting within the chi-square bound, with parallax >= min_parallax_deg.
+    """
+    pairs = _match_unmapped(a, b, max_hamming, ratio)
+    if pairs is None:
+        return []
+    pa, pb = _on_epipolar_lines(K, a, b, *pairs, scale)
     if pa.size == 0:
         return []
+    Ta, Tb = invert(a.pose), invert(b.pose)          # cam_from_world
     Pa = K @ Ta[:3]
     Pb = K @ Tb[:3]
     Xh = cv2.triangulatePoints(Pa, Pb, a.feats.und[pa].T.astype(float), b.feats.und[pb].T.astype(float))
     w = Xh[3]
     good = np.abs(w) > 1e-12
     X = (Xh[:3] / np.where(good, w, 1.0)).T
-    out = []
-    ca, cb = a.centre, b.centre
-    for X_, i, j, g in zip(X, pa, pb, good):
-        if not g:
-            continue
-        xa_c = Ta[:3, :3] @ X_ + Ta[:3, 3]
-        xb_c = Tb[:3, :3] @ X_ + Tb[:3, 3]
-        if xa_c[2] <= 0.02 or xb_c[2] <= 0.02:
-            continue
-        ra, rb = X_ - ca, X_ - cb
-        cosp = ra @ rb / (np.linalg.norm(ra) * np.linalg.norm(rb))
-        if cosp > np.cos(np.radians(min_parallax_deg)):
-            continue
-        ua = K[:2, :2] @ (xa_c[:2] / xa_c[2]) + K[:2, 2]
-        ub = K[:2, :2] @ (xb_c[:2] / xb_c[2]) + K[:2, 2]
-        sa, sb = scale ** a.feats.octave[i], scale ** b.feats.octave[j]
-        if np.sum((ua - a.feats.und[i]) ** 2) > 5.991 * sa * sa or np.sum((ub - b.feats.und[j]) ** 2) > 5.991 * sb * sb:
-            continue
-        out.append((X_, int(i), int(j)))
-    return out
+    return [(X_, int(i), int(j)) for X_, i, j, g in zip(X, pa, pb, good)
+            if g and _keep_point(K, a, b, Ta, Tb, X_, i, j, min_parallax_deg, scale)]
 
 
 class LocalMapper:

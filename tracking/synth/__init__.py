@@ -20,11 +20,11 @@ __all__ = ["synthesize", "scene_from_arg"]
 def scene_from_arg(arg: str):
     """A Scene from a preset name or a scene JSON file path."""
     # the scene tables: only when asked (keeps `import tracking.synth` light)
-    from tracking.synth.presets import EXTRA_TUNING, HEADON, HELD, OCCLUSION, PRESETS, preset
+    from tracking.synth.presets import is_preset, preset
     from tracking.synth.revisits import revisit_by_name
     from tracking.synth.scene import load_scene, parse_scene
 
-    if arg in PRESETS or arg in EXTRA_TUNING or arg in HELD or arg in OCCLUSION or arg in HEADON:
+    if is_preset(arg):   # any group of presets (tracking.synth.presets.GROUPS)
         return parse_scene(preset(arg), f"preset {arg}")
     if (revisit := revisit_by_name(arg)) is not None:   # scene revisits (tracking.synth.revisits)
         return parse_scene(revisit, f"revisit scene {arg}")

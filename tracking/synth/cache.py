@@ -54,7 +54,8 @@ def renderer_fingerprint() -> str:
 
     h = hashlib.sha256()
     here = Path(__file__).resolve().parent
-    files = sorted(p for p in here.glob("*.py") if p.name not in ("presets.py", "cache.py"))
+    # (the presets package, a folder, is not among them)
+    files = sorted(p for p in here.glob("*.py") if p.name != "cache.py")
     files.append(Path(inspect.getsourcefile(RecordingWriter)).resolve())
     for p in files:
         h.update(p.name.encode() + b"\0" + p.read_bytes() + b"\0")

@@ -134,18 +134,28 @@ class DeskRenderer:
         if not rays.flags.c_contiguous:
             rays = np.ascontiguousarray(rays)
         Hd, valid = self.plane_homography(P)
+        ok = valid(rays)
+        all_ok = bool(ok.all())
+        img = self._desk_image(rays, Hd, ok, all_ok)
+        self._print_anchors(img, rays, Hd, ok)
+        img *= self._lamp_light(rays, Hd, ok, all_ok)[..., None]
+        return img
+
+    def _desk_image(self, rays: np.ndarray, Hd: np.ndarray, ok: np.ndarray, all_ok: bool) -> np.ndarray:
+        """float32 BGR of the desk's texture seen along `rays` (the floor's colour where `ok` is False)."""
         # the desk plane seen through a pinhole is a homography of the (undistorted) rays: texture pixels
         # (u, v) are one 3x3 matrix applied to them (cv2 works in double, exact to float32 rounding)
         tex = self.texture
         to_tex = np.array([[tex.ppm, 0.0, -tex.x_min * tex.ppm - 0.5],
                            [0.0, -tex.ppm, tex.y_max * tex.ppm - 0.5], [0.0, 0.0, 1.0]])
         uv = _apply_homography(rays, to_tex @ Hd)
-        ok = valid(rays)
-        all_ok = bool(ok.all())
         if not all_ok:
             uv[~ok] = -10
-        img = cv2.remap(tex.image, uv, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                        borderValue=FLOOR_BGR.tolist()).astype(np.float32)
+        return cv2.remap(tex.image, uv, None, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                         borderValue=FLOOR_BGR.tolist()).astype(np.float32)
+
+    def _print_anchors(self, img: np.ndarray, rays: np.ndarray, Hd: np.ndarray, ok: np.ndarray) -> None:
+        """Paint each printed anchor's paper and ink into `img` (in place) where `rays` see it."""
         step = 4  # find each anchor's paper on a coarse grid first, then evaluate cells only around it
         H, W = ok.shape
         for pat, A in self.printed:
@@ -153,7 +163,7 @@ class DeskRenderer:
             to_print = np.array([[pat.sx, 0.0, -pat.origin[0] * pat.sx], [0.0, pat.sy, -pat.origin[1] * pat.sy],
                                  [0.0, 0.0, 1.0]]) @ np.vstack([A, [0.0, 0.0, 1.0]]) @ Hd
 
-            def paper_and_value(sr, sc):
+            def paper_and_value(sr, sc, pat=pat, to_print=to_print):
                 sub_rays = np.ascontiguousarray(rays[sr, sc])
                 pq = _apply_homography(sub_rays, to_print).astype(np.float64)
                 paper, value = pat.sample(pq[..., 0], pq[..., 1])
@@ -170,6 +180,9 @@ class DeskRenderer:
             sub = img[sr, sc]
             sub[paper & ~ink] = PAPER_BGR
             sub[ink] = INK_BGR
+
+    def _lamp_light(self, rays: np.ndarray, Hd: np.ndarray, ok: np.ndarray, all_ok: bool) -> np.ndarray:
+        """float32 gain of the desk lamp along `rays` (1 where `ok` is False)."""
         # Soft desk lamp: brighter near one side, in desk coordinates so it moves with the scene:
         # 0.88 + 0.2 exp(-|(x, y) - lamp|^2 / 0.5), the offset scaled by 1/sqrt(0.5) by one more homography.
         k = 1.0 / np.sqrt(0.5)
@@ -181,8 +194,7 @@ class DeskRenderer:
         lamp = cv2.exp(-r2) * np.float32(strength) + np.float32(ambient)
         if not all_ok:
             lamp[~ok] = 1.0
-        img *= lamp[..., None]
-        return img
+        return lamp
 
     def plane_homography(self, world_from_camera: np.ndarray):
         """(Hd, valid): Hd (3x3) maps a ray (x/z, y/z, 1) of the camera at this pose to homogeneous desk

@@ -164,29 +164,34 @@ def camera_from_block(block: dict, where: str = "camera") -> Camera:
         raise SessionError(f"{where}: {e}") from None
 
 
-def parse_scene(data: dict, where: str = "scene") -> Scene:
-    """Validate a scene dict; errors are SessionErrors naming the field."""
-    if not isinstance(data, dict):
-        raise SessionError(f"{where}: must be a JSON object")
-    known = {"name", "seed", "fps", "duration", "camera", "anchors", "desk", "trajectory", "effects", "video",
-             "supersample", "held", "occlusion"}
-    for k in data:
-        if k not in known:
-            raise SessionError(f"{where}.{k}: unknown key (known: {', '.join(sorted(known))})")
+_SCENE_KEYS = {"name", "seed", "fps", "duration", "camera", "anchors", "desk", "trajectory", "effects", "video",
+               "supersample", "held", "occlusion"}
+
+
+def _scene_anchors(data: dict, where: str) -> list[AnchorSpec]:
+    """The scene's anchors, each one the renderer can print, lying on the desk as the first one does."""
     if "anchors" not in data:
         raise SessionError(f"{where}.anchors: missing (list of anchors as in session.json)")
     anchors = parse_anchors(data["anchors"], f"{where}.anchors")
     for i, a in enumerate(anchors):
         pattern_for(a)  # raises for kinds the renderer cannot print
         _check_on_desk(a, pattern_for(anchors[0]).normal_sign, f"{where}.anchors[{i}]")
-    if "trajectory" not in data:
-        raise SessionError(f"{where}.trajectory: missing (e.g. {{\"kind\": \"orbit\"}})")
+    return anchors
+
+
+def _timing(data: dict, where: str) -> dict[str, float]:
+    """{"fps": frames a second, "duration": seconds}, both positive (defaults 30 fps, 4 s)."""
     num = {}
     for key, default, lo in (("fps", 30.0, 1e-3), ("duration", 4.0, 1e-3)):
         v = data.get(key, default)
         if not isinstance(v, (int, float)) or isinstance(v, bool) or not v >= lo or not math.isfinite(v):
             raise SessionError(f"{where}.{key}: must be a positive number, got {v!r}")
         num[key] = float(v)
+    return num
+
+
+def _desk(data: dict, where: str) -> tuple[dict, list, str]:
+    """(the desk block, its size [width, height] m, its texture style)."""
     desk = data.get("desk", {})
     if not isinstance(desk, dict):
         raise SessionError(f"{where}.desk: must be an object with size, ppm, seed")
@@ -197,6 +202,11 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
     style = desk.get("style", "desk")
     if style not in STYLES:
         raise SessionError(f"{where}.desk.style: must be one of {', '.join(STYLES)}, got {style!r}")
+    return desk, size, style
+
+
+def _effects(data: dict, where: str) -> dict:
+    """DEFAULT_EFFECTS with the scene's own effects over them, checked."""
     effects = dict(DEFAULT_EFFECTS)
     user_fx = data.get("effects", {})
     if not isinstance(user_fx, dict):
@@ -206,6 +216,38 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
             raise SessionError(f"{where}.effects.{k}: unknown effect (known: {', '.join(DEFAULT_EFFECTS)})")
         effects[k] = v
     _check_effects(effects, f"{where}.effects")
+    return effects
+
+
+def _check_occlusion_and_held(scene: Scene, effects: dict, where: str) -> None:
+    """An occlusion block: not with a held card, a global shutter without motion blur, a valid block; a held
+    block: valid for the scene's rolling shutter."""
+    if scene.occlusion is not None:
+        from tracking.synth.occlusion import check_occlusion
+
+        if scene.held is not None:
+            raise SessionError(f"{where}.occlusion: not with a held card (held); use a desk scene")
+        if (effects.get("rolling_shutter") or 0) > 0 or (effects.get("motion_blur") or 0) > 0:
+            raise SessionError(f"{where}.occlusion: needs a global shutter without motion blur "
+                               "(effects.rolling_shutter and effects.motion_blur 0)")
+        check_occlusion(scene.occlusion, f"{where}.occlusion")
+    if scene.held is not None:
+        check_held(scene.held, effects.get("rolling_shutter"), f"{where}.held")
+
+
+def parse_scene(data: dict, where: str = "scene") -> Scene:
+    """Validate a scene dict; errors are SessionErrors naming the field."""
+    if not isinstance(data, dict):
+        raise SessionError(f"{where}: must be a JSON object")
+    for k in data:
+        if k not in _SCENE_KEYS:
+            raise SessionError(f"{where}.{k}: unknown key (known: {', '.join(sorted(_SCENE_KEYS))})")
+    anchors = _scene_anchors(data, where)
+    if "trajectory" not in data:
+        raise SessionError(f"{where}.trajectory: missing (e.g. {{\"kind\": \"orbit\"}})")
+    num = _timing(data, where)
+    desk, size, style = _desk(data, where)
+    effects = _effects(data, where)
     video = data.get("video", {})
     ss = data.get("supersample", 3)
     if not isinstance(ss, int) or not 1 <= ss <= 8:
@@ -223,18 +265,7 @@ def parse_scene(data: dict, where: str = "scene") -> Scene:
         supersample=ss, held=data.get("held"), occlusion=data.get("occlusion"),
         anchors_shown=_shown(desk, f"{where}.desk.anchors_shown"), lamp=_lamp(desk.get("lamp"), f"{where}.desk.lamp"),
     )
-    if scene.occlusion is not None:
-        from tracking.synth.occlusion import check_occlusion
-
-        if scene.held is not None:
-            raise SessionError(f"{where}.occlusion: not with a held card (held); use a desk scene")
-        if (effects.get("rolling_shutter") or 0) > 0 or (effects.get("motion_blur") or 0) > 0:
-            raise SessionError(f"{where}.occlusion: needs a global shutter without motion blur "
-                               "(effects.rolling_shutter and effects.motion_blur 0)")
-        check_occlusion(scene.occlusion, f"{where}.occlusion")
-    if scene.held is not None:
-        check_held(scene.held, effects.get("rolling_shutter"), f"{where}.held")
-
+    _check_occlusion_and_held(scene, effects, where)
     make_trajectory(scene.trajectory, scene.duration, scene.seed, f"{where}.trajectory")  # validate now
     return scene
 

@@ -67,6 +67,48 @@ def _tiles(w: int, h: int, ppm: float, rng: np.random.Generator, noise_amp: floa
     return np.clip(img, 0, 255).astype(np.uint8)
 
 
+def _noise_base(rng: np.random.Generator, h: int, w: int, lo: float, hi: float, noise_amp: float) -> np.ndarray:
+    """(h, w, 3) uint8: a random base colour in [lo, hi) with multi-scale noise over it."""
+    base = np.array(rng.uniform(lo, hi, 3), dtype=np.float32)
+    img = np.empty((h, w, 3), np.float32)
+    img[:] = base
+    # Multi-scale noise, each octave with its own tint; amplitude grows with scale (photo-like 1/f).
+    for cell in (8, 16, 32, 64, 128, 256, 512):
+        amp = (1.5 + 0.045 * cell) * noise_amp
+        tint = rng.uniform(0.5, 1.0, 3).astype(np.float32)
+        img += _noise_layer(rng, h, w, cell)[..., None] * amp * tint
+    return np.clip(img, 0, 255).astype(np.uint8)
+
+
+def _draw_shape(img: np.ndarray, rng: np.random.Generator, kind: int, centre: tuple[int, int], size: int,
+                thick: int, colour: tuple, scale: float) -> None:
+    """Draw one clutter shape into `img` (in place): kind 0 a circle, 1 a rectangle, 2 a polygon, 3 a stroke,
+    4 an ellipse, else a printed word; `size` px, `thick` px (-1 filled); what else it needs from `rng`."""
+    cx, cy = centre
+    if kind == 0:
+        cv2.circle(img, (cx, cy), size, colour, thick, cv2.LINE_AA)
+    elif kind == 1:
+        cv2.rectangle(img, (cx - size, cy - size // 2), (cx + size, cy + size // 2), colour, thick, cv2.LINE_AA)
+    elif kind == 2:
+        pts = (np.array([cx, cy]) + rng.normal(0, size, (int(rng.integers(3, 7)), 2))).astype(np.int32)
+        if thick < 0:
+            cv2.fillPoly(img, [pts], colour, cv2.LINE_AA)
+        else:
+            cv2.polylines(img, [pts], True, colour, thick, cv2.LINE_AA)
+    elif kind == 3:
+        pts = np.cumsum(rng.normal(0, size * 0.6, (int(rng.integers(3, 9)), 2)), axis=0) + [cx, cy]
+        cv2.polylines(img, [pts.astype(np.int32)], False, colour, max(1, int(2 * scale)), cv2.LINE_AA)
+    elif kind == 4:
+        cv2.ellipse(img, (cx, cy), (size, max(2, size // 3)), float(rng.uniform(0, 180)), 0, 360,
+                    colour, thick, cv2.LINE_AA)
+    else:
+        word = _WORDS[int(rng.integers(len(_WORDS)))]
+        font = int(rng.choice([cv2.FONT_HERSHEY_SIMPLEX, cv2.FONT_HERSHEY_DUPLEX,
+                               cv2.FONT_HERSHEY_COMPLEX, cv2.FONT_HERSHEY_TRIPLEX]))
+        fs = float(np.exp(rng.uniform(np.log(0.5), np.log(3.0))) * scale)
+        cv2.putText(img, word, (cx, cy), font, fs, colour, max(1, int(fs * 2)), cv2.LINE_AA)
+
+
 def make_desk_texture(width_m: float, height_m: float, ppm: float, seed: int = 0,
                       x_min: float | None = None, y_max: float | None = None, style: str = "desk") -> DeskTexture:
     """A cluttered desk of `width_m` x `height_m` metres at `ppm` pixels per metre.
@@ -82,15 +124,7 @@ def make_desk_texture(width_m: float, height_m: float, ppm: float, seed: int = 0
     if style == "tiles":
         return DeskTexture(_tiles(w, h, ppm, rng, noise_amp), -width_m / 2 if x_min is None else x_min,
                            height_m / 2 if y_max is None else y_max, float(ppm))
-    base = np.array(rng.uniform(lo, hi, 3), dtype=np.float32)
-    img = np.empty((h, w, 3), np.float32)
-    img[:] = base
-    # Multi-scale noise, each octave with its own tint; amplitude grows with scale (photo-like 1/f).
-    for cell in (8, 16, 32, 64, 128, 256, 512):
-        amp = (1.5 + 0.045 * cell) * noise_amp
-        tint = rng.uniform(0.5, 1.0, 3).astype(np.float32)
-        img += _noise_layer(rng, h, w, cell)[..., None] * amp * tint
-    img = np.clip(img, 0, 255).astype(np.uint8)
+    img = _noise_base(rng, h, w, lo, hi, noise_amp)
     scale = ppm / 2000.0  # shape sizes are chosen in metres, drawn in pixels
     n_shapes = int(110 * width_m * height_m / 0.5 + 30)
     for _ in range(n_shapes):
@@ -101,28 +135,7 @@ def make_desk_texture(width_m: float, height_m: float, ppm: float, seed: int = 0
         cx, cy = int(rng.uniform(0, w)), int(rng.uniform(0, h))
         size = int(np.exp(rng.uniform(np.log(6), np.log(90))) * scale) + 2
         thick = -1 if rng.random() < 0.6 else int(rng.integers(1, 5) * scale) + 1
-        if kind == 0:
-            cv2.circle(img, (cx, cy), size, colour, thick, cv2.LINE_AA)
-        elif kind == 1:
-            cv2.rectangle(img, (cx - size, cy - size // 2), (cx + size, cy + size // 2), colour, thick, cv2.LINE_AA)
-        elif kind == 2:
-            pts = (np.array([cx, cy]) + rng.normal(0, size, (int(rng.integers(3, 7)), 2))).astype(np.int32)
-            if thick < 0:
-                cv2.fillPoly(img, [pts], colour, cv2.LINE_AA)
-            else:
-                cv2.polylines(img, [pts], True, colour, thick, cv2.LINE_AA)
-        elif kind == 3:
-            pts = np.cumsum(rng.normal(0, size * 0.6, (int(rng.integers(3, 9)), 2)), axis=0) + [cx, cy]
-            cv2.polylines(img, [pts.astype(np.int32)], False, colour, max(1, int(2 * scale)), cv2.LINE_AA)
-        elif kind == 4:
-            cv2.ellipse(img, (cx, cy), (size, max(2, size // 3)), float(rng.uniform(0, 180)), 0, 360,
-                        colour, thick, cv2.LINE_AA)
-        else:
-            word = _WORDS[int(rng.integers(len(_WORDS)))]
-            font = int(rng.choice([cv2.FONT_HERSHEY_SIMPLEX, cv2.FONT_HERSHEY_DUPLEX,
-                                   cv2.FONT_HERSHEY_COMPLEX, cv2.FONT_HERSHEY_TRIPLEX]))
-            fs = float(np.exp(rng.uniform(np.log(0.5), np.log(3.0))) * scale)
-            cv2.putText(img, word, (cx, cy), font, fs, colour, max(1, int(fs * 2)), cv2.LINE_AA)
+        _draw_shape(img, rng, kind, (cx, cy), size, thick, colour, scale)
     # A little softness so the texture is band-limited (no aliasing when rendered at the same scale).
     img = cv2.GaussianBlur(img, (0, 0), 1.0)
     return DeskTexture(

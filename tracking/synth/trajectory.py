@@ -80,50 +80,74 @@ def make_trajectory(spec: dict, duration: float, seed: int = 0, where: str = "tr
     kind = spec["kind"]
     g = lambda k, d=None: _get(spec, k, d, where)  # noqa: E731
     target0 = np.asarray(spec.get("target", [0.0, 0.0, 0.0]), float)
-    if kind == "static":
-        eye = _eye_from_polar(g("azimuth", -90.0), g("distance", 0.5), g("elevation", 60.0)) + target0
-        base = lambda t: look_at(eye, target0)  # noqa: E731
-    elif kind == "orbit":
-        a0, a1 = g("azimuth_start", -130.0), g("azimuth_end", -50.0)
-        d, el, swing = g("distance", 0.5), g("elevation", 55.0), g("elevation_swing", 0.0)
-
-        def base(t):
-            s = t / duration
-            eye = _eye_from_polar(a0 + (a1 - a0) * s, d, el + swing * np.sin(2 * np.pi * s)) + target0
-            return look_at(eye, target0)
-    elif kind == "approach":
-        az, el = g("azimuth", -90.0), g("elevation", 60.0)
-        d0, d1 = g("distance_start", 0.7), g("distance_end", 0.25)
-
-        def base(t):
-            d = d0 + (d1 - d0) * _smoothstep(t / duration)
-            return look_at(_eye_from_polar(az, d, el) + target0, target0)
-    elif kind == "pan":
-        eye = _eye_from_polar(g("azimuth", -90.0), g("distance", 0.5), g("elevation", 60.0)) + target0
-        half, cycles = np.radians(g("pan_deg", 30.0)), g("cycles", 1.0)
-        right = np.array([1.0, 0.0, 0.0])
-
-        def base(t):
-            ang = half * np.sin(2 * np.pi * cycles * t / duration)
-            dist = np.linalg.norm(target0 - eye)
-            return look_at(eye, target0 + right * dist * np.tan(ang))
-    elif kind == "leave_view":
-        eye0 = _eye_from_polar(g("azimuth", -90.0), g("distance", 0.45), g("elevation", 60.0)) + target0
-        away = np.array(list(g("away", [0.45, 0.1])) + [0.0], float)
-        t_leave, t_back, ramp = g("leave_at", 1.0), g("back_at", 3.0), g("ramp", 0.6)
-
-        def base(t):
-            # 0 -> 1 over `ramp` seconds from leave_at, back to 0 over `ramp` seconds before back_at
-            w = _smoothstep((t - t_leave) / ramp) * (1.0 - _smoothstep((t - (t_back - ramp)) / ramp))
-            return look_at(eye0 + 0.4 * w * away, target0 + w * away)
-    elif kind == "keyframes":
-        base = _keyframes(g("keys"), where)
-    else:
+    if not isinstance(kind, str) or kind not in _KINDS:
         raise SessionError(f"{where}.kind: must be static, orbit, approach, pan, leave_view or keyframes, "
                           f"got {kind!r}")
+    base = _KINDS[kind](g, target0, duration, where)
 
     shake = spec.get("shake")
     return _with_shake(base, shake, seed) if shake else base
+
+
+# Each kind's path: (g: a field of the block by name and default, checked; the point looked at; the duration s;
+# where, for errors) -> t -> desk_from_camera.
+
+def _static(g, target0: np.ndarray, duration: float, where: str) -> PoseFn:
+    eye = _eye_from_polar(g("azimuth", -90.0), g("distance", 0.5), g("elevation", 60.0)) + target0
+    return lambda t: look_at(eye, target0)
+
+
+def _orbit(g, target0: np.ndarray, duration: float, where: str) -> PoseFn:
+    a0, a1 = g("azimuth_start", -130.0), g("azimuth_end", -50.0)
+    d, el, swing = g("distance", 0.5), g("elevation", 55.0), g("elevation_swing", 0.0)
+
+    def base(t):
+        s = t / duration
+        eye = _eye_from_polar(a0 + (a1 - a0) * s, d, el + swing * np.sin(2 * np.pi * s)) + target0
+        return look_at(eye, target0)
+    return base
+
+
+def _approach(g, target0: np.ndarray, duration: float, where: str) -> PoseFn:
+    az, el = g("azimuth", -90.0), g("elevation", 60.0)
+    d0, d1 = g("distance_start", 0.7), g("distance_end", 0.25)
+
+    def base(t):
+        d = d0 + (d1 - d0) * _smoothstep(t / duration)
+        return look_at(_eye_from_polar(az, d, el) + target0, target0)
+    return base
+
+
+def _pan(g, target0: np.ndarray, duration: float, where: str) -> PoseFn:
+    eye = _eye_from_polar(g("azimuth", -90.0), g("distance", 0.5), g("elevation", 60.0)) + target0
+    half, cycles = np.radians(g("pan_deg", 30.0)), g("cycles", 1.0)
+    right = np.array([1.0, 0.0, 0.0])
+
+    def base(t):
+        ang = half * np.sin(2 * np.pi * cycles * t / duration)
+        dist = np.linalg.norm(target0 - eye)
+        return look_at(eye, target0 + right * dist * np.tan(ang))
+    return base
+
+
+def _leave_view(g, target0: np.ndarray, duration: float, where: str) -> PoseFn:
+    eye0 = _eye_from_polar(g("azimuth", -90.0), g("distance", 0.45), g("elevation", 60.0)) + target0
+    away = np.array(list(g("away", [0.45, 0.1])) + [0.0], float)
+    t_leave, t_back, ramp = g("leave_at", 1.0), g("back_at", 3.0), g("ramp", 0.6)
+
+    def base(t):
+        # 0 -> 1 over `ramp` seconds from leave_at, back to 0 over `ramp` seconds before back_at
+        w = _smoothstep((t - t_leave) / ramp) * (1.0 - _smoothstep((t - (t_back - ramp)) / ramp))
+        return look_at(eye0 + 0.4 * w * away, target0 + w * away)
+    return base
+
+
+def _keyframe_path(g, target0: np.ndarray, duration: float, where: str) -> PoseFn:
+    return _keyframes(g("keys"), where)
+
+
+_KINDS = {"static": _static, "orbit": _orbit, "approach": _approach, "pan": _pan, "leave_view": _leave_view,
+          "keyframes": _keyframe_path}
 
 
 def _keyframes(keys, where: str) -> PoseFn:

@@ -31,7 +31,7 @@ from tracking.default_intrinsics import is_estimated
 from arapp.app.guidance import ambiguous_hint, lost_hint
 
 RECORDINGS_DIR = Path(__file__).resolve().parents[3] / "recordings"
-# what each bundled recording shows (tracking/synth/presets.py makes them)
+# what each bundled recording shows (tracking.synth.presets makes them)
 RECORDING_NOTES = {
     "board_orbit": "a marker board seen from an orbit (the demo)",
     "board_orbit_720p": "the same board at 1280x720",
