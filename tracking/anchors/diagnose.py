@@ -42,20 +42,32 @@ def diagnose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarray, max_b
     """Hints (strings naming `anchors[i].field`) about mismatches between the session and the image."""
     gray = _gray(image)
     models = build_models(anchors)
-    hints = []
-    det = ArucoDetection(models, camera)
-    obs = det.detect(gray)
+    obs = ArucoDetection(models, camera).detect(gray)
     seen = {o.anchor for o in obs}
+    hints = _dictionary_hints(models, seen, _markers_by_family(gray))
+    hints += _qr_hints(models, gray)
+    alone, layout = _layout_hints(models, obs, camera, max_board_rms)
+    return hints + layout + _scale_hints(models, alone)
+
+
+def _markers_by_family(gray) -> dict[str, list[int]]:
+    """The ids every predefined dictionary family finds in the image (families that find none left out)."""
     names = set(aruco_dictionary_names())
     params = cv2.aruco.DetectorParameters()
-    found_by_family = {}
+    found = {}
     for fam in _FAMILIES:
         if fam not in names:
             continue
         d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, fam))
         _, ids, _ = cv2.aruco.ArucoDetector(d, params).detectMarkers(gray)
         if ids is not None:
-            found_by_family[fam] = sorted(set(ids.ravel().tolist()))
+            found[fam] = sorted(set(ids.ravel().tolist()))
+    return found
+
+
+def _dictionary_hints(models, seen: set, found_by_family: dict) -> list[str]:
+    """Marker anchors not seen while markers of the same family (other ids) or another family are."""
+    hints = []
     for m in models:
         if m.anchor_kind.detector not in ARUCO_FAMILIES or m.index in seen:
             continue
@@ -72,19 +84,28 @@ def diagnose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarray, max_b
             desc = "; ".join(f"{f} ids {_ids(v)}" for f, v in others.items())
             hints.append(f"anchors[{m.index}]: no {a.dictionary} markers found, but the image shows markers of "
                          f"another dictionary ({desc}): set anchors[{m.index}].dictionary to the one that was printed")
+    return hints
+
+
+def _qr_hints(models, gray) -> list[str]:
+    """QR anchors whose text no code in the image carries, while codes with other texts are seen."""
     qr_models = [m for m in models if m.anchor_kind.detector == "qr"]
-    if qr_models:
-        ok, texts, _, _ = cv2.QRCodeDetector().detectAndDecodeMulti(gray)
-        texts = [t for t in (texts if ok else []) if t]
-        read = {normal_text(t) for t in texts}
-        wanted = {normal_text(m.spec.text) for m in qr_models}
-        for m in qr_models:
-            if normal_text(m.spec.text) not in read and texts and not (read & wanted):
-                hints.append(f"anchors[{m.index}]: no QR code with text {m.spec.text!r}, but the image shows "
-                             f"QR code(s) {texts}: set anchors[{m.index}].text to the printed text")
-    # Geometry: each board alone must fit its own declared layout; anchors seen together must agree on scale.
+    if not qr_models:
+        return []
+    ok, texts, _, _ = cv2.QRCodeDetector().detectAndDecodeMulti(gray)
+    texts = [t for t in (texts if ok else []) if t]
+    read = {normal_text(t) for t in texts}
+    wanted = {normal_text(m.spec.text) for m in qr_models}
+    return [f"anchors[{m.index}]: no QR code with text {m.spec.text!r}, but the image shows "
+            f"QR code(s) {texts}: set anchors[{m.index}].text to the printed text"
+            for m in qr_models if normal_text(m.spec.text) not in read and texts and not (read & wanted)]
+
+
+def _layout_hints(models, obs, camera: Camera, max_board_rms: float) -> tuple[dict, list[str]]:
+    """Each seen anchor's pose on its own (by anchor index), and hints for boards that do not fit their
+    declared layout (reprojection error over `max_board_rms` px)."""
     wfa = [m.world_from_anchor for m in models]
-    alone = {}
+    alone, hints = {}, []
     for o in obs:
         sol = solve_pose([o], wfa, camera, outlier_px=1e3)
         if sol is None:
@@ -96,22 +117,28 @@ def diagnose(anchors: list[AnchorSpec], camera: Camera, image: np.ndarray, max_b
             hints.append(f"anchors[{o.anchor}]: the {kind} does not fit its declared layout (reprojection error "
                          f"{sol.rms:.1f} px): check anchors[{o.anchor}].{fields.replace(' and ', ' and .')} "
                          f"against the printed board ({fields} in metres)")
-    if len(alone) >= 2:
-        # boards are the best scale reference, a lone square the worst
-        ref = min(alone, key=lambda k: (models[k].anchor_kind.single_square, k))
-        for k, sol in alone.items():
-            if k == ref:
-                continue
-            # Scale error of anchor k shows as its own distance estimate disagreeing with the reference.
-            dk = np.linalg.norm(sol.camera_from_world[:3, :3] @ models[k].world_from_anchor[:3, 3] + sol.camera_from_world[:3, 3])
-            dr = np.linalg.norm(alone[ref].camera_from_world[:3, :3] @ models[k].world_from_anchor[:3, 3]
-                                + alone[ref].camera_from_world[:3, 3])
-            ratio = dk / dr if dr > 0 else 1.0
-            if abs(ratio - 1.0) > 0.05:
-                field = models[k].anchor_kind.size_fields
-                hints.append(f"anchors[{k}] looks {ratio:.2f} times as far as anchors[{ref}] says it is: its "
-                             f"declared size is probably wrong by that factor (check anchors[{k}].{field}, metres, "
-                             f"and its world_from_anchor)")
+    return alone, hints
+
+
+def _scale_hints(models, alone: dict) -> list[str]:
+    """Anchors seen together must agree on scale: each against the best reference (boards before lone squares)."""
+    if len(alone) < 2:
+        return []
+    ref = min(alone, key=lambda k: (models[k].anchor_kind.single_square, k))
+    hints = []
+    for k, sol in alone.items():
+        if k == ref:
+            continue
+        # Scale error of anchor k shows as its own distance estimate disagreeing with the reference.
+        dk = np.linalg.norm(sol.camera_from_world[:3, :3] @ models[k].world_from_anchor[:3, 3] + sol.camera_from_world[:3, 3])
+        dr = np.linalg.norm(alone[ref].camera_from_world[:3, :3] @ models[k].world_from_anchor[:3, 3]
+                            + alone[ref].camera_from_world[:3, 3])
+        ratio = dk / dr if dr > 0 else 1.0
+        if abs(ratio - 1.0) > 0.05:
+            field = models[k].anchor_kind.size_fields
+            hints.append(f"anchors[{k}] looks {ratio:.2f} times as far as anchors[{ref}] says it is: its "
+                         f"declared size is probably wrong by that factor (check anchors[{k}].{field}, metres, "
+                         f"and its world_from_anchor)")
     return hints
 
 

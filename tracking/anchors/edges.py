@@ -101,6 +101,42 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
     if x1 <= x0 or y1 <= y0:
         return out, ok
     img = gray[y0:y1, x0:x1].astype(np.float32)
+    edge, valid, contrast = _edge_samples(img, x0, y0, w, h, quads, r, end_margin, min_contrast)
+    # Lines for all sides at once: undistort every edge point in one call, then a weighted total-least-
+    # squares fit per side (weights 0/1 = valid), one pass of outlier rejection.
+    M = len(quads)
+    pts = edge.reshape(-1, 2)
+    if camera is not None and camera.has_distortion:
+        pts = camera.undistort_points(pts)
+    pts = pts.reshape(M, 4, _NS, 2)
+    wgt = valid.astype(np.float64)
+    only = _per_quad(strong_only, M, bool)
+    if consensus_px is not None or only.any():
+        # a finger over the edge leaves a step from black to skin, well short of black to paper
+        typical = np.array([np.median(np.abs(contrast[m][valid[m]])) if valid[m].any() else 0.0 for m in range(M)])
+        strong = valid & (np.abs(contrast) >= STRONG_STEP * typical[:, None, None])
+        if consensus_px is not None:
+            wgt = wgt * _consensus(pts, strong, consensus_px)
+        else:
+            wgt = wgt * np.where(only[:, None, None], strong, True)
+    nvec, c, cnt = _fit_side_lines(pts, wgt)
+    corners, good = _side_intersections(nvec, c, cnt)
+    if camera is not None and camera.has_distortion and good.any():
+        corners[good] = _distort(camera, corners[good].reshape(-1, 2)).reshape(-1, 4, 2)
+    # a refinement that moves a corner far is a failure (wrong edge), not an improvement
+    moved = np.linalg.norm(corners - quads, axis=2).max(axis=1)
+    good &= moved <= np.maximum(0.5 * cell_px, 1.5)
+    out[good] = corners[good]
+    ok[good] = True
+    return out, ok
+
+
+def _edge_samples(img, x0: int, y0: int, w: int, h: int, quads: np.ndarray, r: np.ndarray, end_margin,
+                  min_contrast: float):
+    """Edge points of every side of every quad (M,4,ns,2 distorted pixels), their validity (M,4,ns) and the
+    step across the edge there (M,4,ns grey levels), from the float32 crop `img` at (x0, y0) of a w x h image;
+    `r` (M,) the search's reach across each edge in pixels. A numeric kernel: one vectorised pass over all
+    samples, kept in one piece so its floating-point order (and so its results) stays as measured."""
     # Sample geometry for every side of every quad at once.
     a = quads
     b = quads[:, _NEXT]
@@ -146,23 +182,13 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
         valid = inside & (np.abs(contrast) > min_contrast) & np.isfinite(sc) & (np.abs(sc) < rr) & mono
         shift = shift + np.where(valid, sc, 0.0)
     edge = base + nrm[:, :, None, :] * shift[..., None]  # (M,4,ns,2)
-    # Lines for all sides at once: undistort every edge point in one call, then a weighted total-least-
-    # squares fit per side (weights 0/1 = valid), one pass of outlier rejection.
-    M = len(quads)
-    pts = edge.reshape(-1, 2)
-    if camera is not None and camera.has_distortion:
-        pts = camera.undistort_points(pts)
-    pts = pts.reshape(M, 4, ns, 2)
-    wgt = valid.astype(np.float64)
-    only = _per_quad(strong_only, M, bool)
-    if consensus_px is not None or only.any():
-        # a finger over the edge leaves a step from black to skin, well short of black to paper
-        typical = np.array([np.median(np.abs(contrast[m][valid[m]])) if valid[m].any() else 0.0 for m in range(M)])
-        strong = valid & (np.abs(contrast) >= STRONG_STEP * typical[:, None, None])
-        if consensus_px is not None:
-            wgt = wgt * _consensus(pts, strong, consensus_px)
-        else:
-            wgt = wgt * np.where(only[:, None, None], strong, True)
+    return edge, valid, contrast
+
+
+def _fit_side_lines(pts: np.ndarray, wgt: np.ndarray):
+    """A weighted total-least-squares line per side (pts (M,4,ns,2) undistorted, wgt (M,4,ns) 0/1), with one
+    pass of outlier rejection: its unit normal (M,4,2), a point on it (M,4,2) and the samples kept (M,4)."""
+    ns = pts.shape[2]
     # the fit's arrays laid out (sample, marker, side), x and y apart (long rows for numpy again); sums over
     # the samples in numpy's own order for the (M,4,ns) layout: sequential where it summed over a middle
     # axis, pairwise (_sum16) where over the last one
@@ -189,6 +215,12 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
     cnt = W.sum(axis=0)
     nvec = np.stack([nx, ny], axis=-1)  # (M,4,2)
     c = np.stack([cx, cy], axis=-1)
+    return nvec, c, cnt
+
+
+def _side_intersections(nvec: np.ndarray, c: np.ndarray, cnt: np.ndarray):
+    """Corner k = the intersection of side k-1 and side k (normals nvec, points c, (M,4,2)); ok where both
+    sides kept 5+ samples and are not parallel. Returns (corners (M,4,2), ok (M,))."""
     side_ok = cnt >= 5
     # corner k = intersection of side k-1 and side k: n1.x = n1.c1, n2.x = n2.c2
     n1, n2 = nvec[:, _PREV], nvec
@@ -199,14 +231,7 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
     safe = np.where(np.abs(det) > 1e-6, det, 1.0)
     corners = np.stack([(b1 * n2[..., 1] - b2 * n1[..., 1]) / safe, (n1[..., 0] * b2 - n2[..., 0] * b1) / safe], -1)
     good = side_ok.all(axis=1) & (np.abs(det) > 1e-6).all(axis=1)
-    if camera is not None and camera.has_distortion and good.any():
-        corners[good] = _distort(camera, corners[good].reshape(-1, 2)).reshape(-1, 4, 2)
-    # a refinement that moves a corner far is a failure (wrong edge), not an improvement
-    moved = np.linalg.norm(corners - quads, axis=2).max(axis=1)
-    good &= moved <= np.maximum(0.5 * cell_px, 1.5)
-    out[good] = corners[good]
-    ok[good] = True
-    return out, ok
+    return corners, good
 
 
 def _consensus(pts: np.ndarray, valid: np.ndarray, tol: float) -> np.ndarray:
