@@ -114,7 +114,6 @@ class AnchorTracker:
         self.deskew_extrapolate_min = 12  # points (three markers' corners): see _deskew
         self.unblur_px = None if unblur_px is None else float(unblur_px)
         self._tracked_only = False
-        self._caller_cfw: np.ndarray | None = None   # the caller's camera_from_world this frame (process)
         self.outlier_px = float(outlier_px)
         self.branch_decay = float(branch_decay)
         self.branch_switch = float(branch_switch)
@@ -232,8 +231,6 @@ class AnchorTracker:
         self._tracked_only = False
         fast = self._moving_fast(pred_cfw)
         ref_cfw = invert(reference) if reference is not None else pred_cfw
-        # (the caller's own pose this frame, where the anchors are looked for when they were not tracked)
-        self._caller_cfw = None if reference is None else ref_cfw
         aruco_obs = self._detect_aruco(gray, pred_cfw, fast)
         qr_obs = self.qr.process(gray, pred_cfw, self._expected_qr(pred_cfw)) if self.qr.models else []
         obs, rejected = self._screen_new(aruco_obs + qr_obs, ref_cfw)
@@ -528,12 +525,9 @@ class AnchorTracker:
         """The ArUco anchors' observations: re-found on their edges where `pred_cfw` puts them, else detected
         in a region around that, else in the whole frame. Not re-found while the camera moves `fast`
         (a prediction off by more than half a cell, as it is then, never re-finds them: time lost).
-
-        When the anchors were not tracked last frame but the caller's pose holds this one (its `reference`
-        to `process`: its map or flow carries the pose), they are looked for only where that pose puts
-        them (a fast pan smears them past reading for many frames, each a whole frame's detector pass for
-        nothing), and not at all while it puts every anchor outside the image; the whole frame is still
-        searched every `full_every` frames."""
+        (Looking only where the caller's map or flow puts the anchors while they are not tracked saved a
+        whole-frame pass a frame on fast pans, but a marker moved in the room is then never found again: the
+        map's pose, in the anchor's frame, says nothing of where a moved marker went.)"""
         if not self.aruco.models:
             return []
         if (self.track_markers and not fast and pred_cfw is not None and self.frame % self.full_every
@@ -549,22 +543,14 @@ class AnchorTracker:
         # failed region search would just add to the full-frame one
         if self.roi and pred_cfw is not None and self.frame % self.full_every and self.tracked_keys:
             roi = self._aruco_roi(pred_cfw, gray.shape)
-        elif self.roi and self._caller_cfw is not None and self.frame % self.full_every:
-            roi = self._aruco_roi(self._caller_cfw, gray.shape, outside=True)
-            if roi == "outside":
-                return []
-            if roi is not None:
-                return self.aruco.detect(gray, roi)
         if roi is not None:
             obs = self.aruco.detect(gray, roi)
             if obs:
                 return obs
         return self.aruco.detect(gray)
 
-    def _aruco_roi(self, cfw: np.ndarray, shape, outside: bool = False) -> tuple[int, int, int, int] | str | None:
-        """Box around the predicted image of every ArUco anchor in front of the camera; None = whole frame.
-        `outside`: "outside" when every anchor, with the box's slack, lies in front of the camera but wholly
-        outside the image (else None for that too)."""
+    def _aruco_roi(self, cfw: np.ndarray, shape) -> tuple[int, int, int, int] | None:
+        """Box around the predicted image of every ArUco anchor in front of the camera; None = whole frame."""
         pts, z = project(self.camera, cfw, np.concatenate([self.outlines[m.index] for m in self.aruco.models]))
         if np.any(z <= 0.01):
             return None
@@ -574,8 +560,6 @@ class AnchorTracker:
         pad = 0.2 * (hi - lo) + 24
         x0, y0 = np.maximum(np.floor(lo - pad), 0).astype(int)
         x1, y1 = np.minimum(np.ceil(hi + pad), [w, h]).astype(int)
-        if outside and (x1 <= x0 or y1 <= y0):
-            return "outside"
         if x1 - x0 < 32 or y1 - y0 < 32 or (x1 - x0) * (y1 - y0) > 0.7 * w * h:
             return None
         return int(x0), int(y0), int(x1), int(y1)
