@@ -147,6 +147,10 @@ def test_held_marker_card_is_no_worse_than_plain(name):
     assert int(np.isfinite(e).sum()) >= int(np.isfinite(plain).sum()), (int(np.isfinite(e).sum()),
                                                                          int(np.isfinite(plain).sum()))
     assert float(np.nanmax(e)) <= float(np.nanmax(plain)), (float(np.nanmax(e)), float(np.nanmax(plain)))
+    # the 3 cm: not more frames beyond it than plain OpenCV's, within two (measured 6 and 6; keeping
+    # the IPPE branch the prediction holds over the one the corners fit better gave 15)
+    over, plain_over = int(np.sum(e > MAX_ERR_M)), int(np.sum(plain > MAX_ERR_M))
+    assert over <= plain_over + 2, (over, plain_over)
     # never placed from the still room: every placed frame is the marker's or the flow on it
     assert all(s in ("marker", "slam") for s, p in zip(r["states"], r["poses"]) if p is not None)
 
