@@ -134,8 +134,10 @@ def test_held_marker_card_is_no_worse_than_plain(name):
     no further off than the peer's worst; the few points on a lone marker do not carry it across a swing.
     The card is seen to move by the still background (pixels, no pose) while it drifts, before its first
     swing, so the still room never carries it (measured on test_held_marker: moving from frame 30, 106
-    frames placed against plain's 105, worst 6.0 cm against 6.4 cm; the rule was chosen on
-    tune_held_marker, where it places 110 against 110 and is 8.1 cm off at worst against plain's 7.8)."""
+    frames placed against plain's 105, worst 6.0 cm against 6.4 cm, 6 frames over 3 cm as plain's 6 (15
+    before the anchor tracker's IPPE choice let the better-fitting branch win: AnchorTracker
+    branch_sigma_deg); the rules were chosen on tune_held_marker, where it places 110 against 110 and is
+    3.9 cm off at worst against plain's 7.8, 3 frames over 3 cm against plain's 12)."""
     r = _run(name)
     e, plain = r["errors"], r["plain"]
     assert r["moving"], "the card moved in the room but the tracker did not notice"
@@ -145,6 +147,10 @@ def test_held_marker_card_is_no_worse_than_plain(name):
     assert int(np.isfinite(e).sum()) >= int(np.isfinite(plain).sum()), (int(np.isfinite(e).sum()),
                                                                          int(np.isfinite(plain).sum()))
     assert float(np.nanmax(e)) <= float(np.nanmax(plain)), (float(np.nanmax(e)), float(np.nanmax(plain)))
+    # the issue's 3 cm: not more frames beyond it than plain OpenCV's, within two (measured 6 and 6; keeping
+    # the IPPE branch the prediction holds over the one the corners fit better gave 15)
+    over, plain_over = int(np.sum(e > MAX_ERR_M)), int(np.sum(plain > MAX_ERR_M))
+    assert over <= plain_over + 2, (over, plain_over)
     # never placed from the still room: every placed frame is the marker's or the flow on it
     assert all(s in ("marker", "slam") for s, p in zip(r["states"], r["poses"]) if p is not None)
 

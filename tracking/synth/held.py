@@ -102,7 +102,9 @@ class HeldRenderer:
                                          desk_ppm=float(wall["ppm"]), desk_seed=int(wall["seed"]),
                                          desk_style=str(wall["style"]), effects={**scene.effects, "occluder": None})
         self.wall = DeskRenderer(wall_scene)
-        self.wall.patterns = []   # nothing printed on the wall
+        # nothing printed on the wall (the renderer draws its `printed` anchors: emptying `patterns` alone left a
+        # copy of the card's marker on the wall, a second detection of the anchor 0.8 m behind the card)
+        self.wall.patterns = self.wall.printed = []
         self.card_pose = card_path(held["keys"])
         self.camera_pose = make_trajectory(scene.trajectory, scene.duration, scene.seed)
         # room_from_card_desk = room_from_card_centre @ centre_from_desk (the anchors' centre to the origin)
