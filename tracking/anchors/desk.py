@@ -111,6 +111,7 @@ class DeskPlane:
         self._prev2_px: np.ndarray | None = None    # the desk points two frames back (pixels, as seen)
         self._prev_dt: float | None = None
         self._ref_second = False                    # the reference's points deskewed with a second-order difference
+        self._followed = 0                          # frames followed since the reference
         self._frames = 0                            # frames fitted since the reference was taken
         self.decided = False
 
@@ -132,7 +133,7 @@ class DeskPlane:
         pts = pts.reshape(-1, 2).astype(np.float32)
         self._prev_gray, self._prev_px, self._prev_t = gray, pts, t
         self._ref_px, self._ref_deskewed, self._frames = pts, self.camera.readout <= 0, 0
-        self._prev2_px, self._prev_dt, self._ref_second = None, None, False
+        self._prev2_px, self._prev_dt, self._ref_second, self._followed = None, None, False, 0
         self._ref_x = self._normalised(pts)
         self._ref_marker = (np.asarray(world, float), self._normalised(img))
         self._ref_branches = list(branches)
@@ -162,6 +163,7 @@ class DeskPlane:
         dt = t - self._prev_t if self._prev_t is not None else 0.0
         dt_before, self._prev_dt = self._prev_dt, dt
         self._prev_t = t
+        self._followed += 1
         if self.camera.readout <= 0 or not 0 < dt <= 0.2:
             return self._prev_px
         cur = self._prev_px
@@ -169,12 +171,12 @@ class DeskPlane:
         second = prev2 is not None and dt_before is not None and abs(dt_before - dt) < 0.2 * dt
         vel = (3.0 * cur - 4.0 * prev + prev2) / (2.0 * dt) if second else (cur - prev) / dt
         vel = self._smooth(cur, vel)
-        if not self._ref_deskewed or (second and not self._ref_second):
-            # (two frames on, prev2 is the reference's own points: prev those of the frame after it)
+        second_ref = second and self._followed == 2   # prev2: the reference's own points, prev: the next frame's
+        if not self._ref_deskewed or (second_ref and not self._ref_second):
             x0 = self._ref_px
-            v0 = (-3.0 * x0 + 4.0 * prev - cur) / (2.0 * dt) if second else (cur - prev) / dt
+            v0 = (-3.0 * x0 + 4.0 * prev - cur) / (2.0 * dt) if second_ref else (cur - prev) / dt
             ref = x0 - self._smooth(x0, v0) * self.camera.row_offsets(x0[:, 1])[:, None]
-            self._ref_x, self._ref_deskewed, self._ref_second = self._normalised(ref), True, second
+            self._ref_x, self._ref_deskewed, self._ref_second = self._normalised(ref), True, second_ref
         return cur - vel * self.camera.row_offsets(cur[:, 1])[:, None]
 
     def _smooth(self, px: np.ndarray, vel: np.ndarray) -> np.ndarray:
