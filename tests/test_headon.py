@@ -3,10 +3,10 @@
 Recording: tracking.synth.presets.HEADON `test_headon` (a 3 cm marker at ~0.7 m on a textured desk, the camera
 held by hand 4-7 degrees off the marker's normal, webcam effects), rendered on first use and cached in
 the recordings cache, .cache/recordings/ (tests/scenes.py `held_recording`). It was made from fresh seeds and never looked at while
-choosing the desk's parameters (those were chosen on tune_headon and tune_headon_b). Ground truth: the
+choosing the desk's parameters (those were chosen on tune_headon, tune_headon_b and tune_headon_c). Ground truth: the
 camera pose per frame from the generator, an oracle independent of the tracker. The goals (rotation error
 <= 2 degrees after the first second, jitter <= half of plain OpenCV's) are asserted as the issue states them;
-the position error is asserted near what is measured (2.0 % of the distance: the goal of 1 % is not met).
+the position error is asserted near what is measured (1.5 % of the distance: the goal of 1 % is not met).
 """
 
 from __future__ import annotations
@@ -14,7 +14,6 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from scenes import held_recording
@@ -52,8 +51,8 @@ def test_the_desk_settles_the_tilt_of_a_head_on_marker(headon, runs):
     # the recording shows the ambiguity: the marker's own pose flips or tilts by degrees, plain OpenCV's too
     assert marker["rot_late_max"] > 5.0 and plain["rot_late_max"] > 5.0
     assert desk["tracked"] == 1.0
-    assert desk["rot_late_max"] <= 2.0          # issue 25.4's goal (measured 1.3)
-    assert desk["pos_fraction"] <= 0.025        # measured 2.0 % (the goal, 1 %, is not met)
+    assert desk["rot_late_max"] <= 2.0          # issue 25.4's goal (measured 1.04)
+    assert desk["pos_fraction"] <= 0.018        # measured 1.54 % (the goal, 1 %, is not met)
     assert desk["jitter_m"] <= 0.5 * plain["jitter_m"]
 
 

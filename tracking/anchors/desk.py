@@ -108,6 +108,10 @@ class DeskPlane:
         self._ref_px: np.ndarray | None = None     # the desk points in the reference frame (pixels, as seen)
         self._ref_deskewed = False                  # ... moved to the reference's centre-row time yet
         self._prev_t: float | None = None
+        self._prev2_px: np.ndarray | None = None    # the desk points two frames back (pixels, as seen)
+        self._prev_dt: float | None = None
+        self._ref_second = False                    # the reference's points deskewed with a second-order difference
+        self._followed = 0                          # frames followed since the reference
         self._frames = 0                            # frames fitted since the reference was taken
         self.decided = False
 
@@ -129,6 +133,7 @@ class DeskPlane:
         pts = pts.reshape(-1, 2).astype(np.float32)
         self._prev_gray, self._prev_px, self._prev_t = gray, pts, t
         self._ref_px, self._ref_deskewed, self._frames = pts, self.camera.readout <= 0, 0
+        self._prev2_px, self._prev_dt, self._ref_second, self._followed = None, None, False, 0
         self._ref_x = self._normalised(pts)
         self._ref_marker = (np.asarray(world, float), self._normalised(img))
         self._ref_branches = list(branches)
@@ -138,26 +143,52 @@ class DeskPlane:
 
     def _follow(self, gray: np.ndarray, t: float) -> np.ndarray:
         """The desk points followed into `gray` (forward-backward checked); keeps only those. Their pixels, moved
-        to the frame's centre-row time for a rolling shutter (`camera.readout`): each point by its own image
-        velocity since the last frame times its row's offset (the reference frame's points likewise, with the
-        velocity to the frame after it, once)."""
+        to the frame's centre-row time for a rolling shutter (`camera.readout`): each point by the image
+        velocity at this frame's time times its row's offset. The velocity is the backward difference over the
+        last two frames (second order, exact for a steady acceleration: the one-frame difference is the
+        velocity half a frame earlier, and a hand's shake changes it by a tenth of a pixel over a readout),
+        smoothed by a quadratic field over all points (`_smooth`); over the first frame alone, the one-frame
+        difference. The reference frame's points likewise, with the forward difference: of first order on the
+        frame after it, then of second order on the frame after that."""
         nxt, st, _ = cv2.calcOpticalFlowPyrLK(self._prev_gray, gray, self._prev_px, None, **_LK)
         back, st2, _ = cv2.calcOpticalFlowPyrLK(gray, self._prev_gray, nxt, None, **_LK)
         ok = (st.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm(back - self._prev_px, axis=1) < 0.5)
         h, w = gray.shape
         ok &= (nxt[:, 0] >= 0) & (nxt[:, 0] < w) & (nxt[:, 1] >= 0) & (nxt[:, 1] < h)
         prev = self._prev_px[ok]
+        prev2 = None if self._prev2_px is None else self._prev2_px[ok]
+        self._prev2_px = prev
         self._prev_px, self._ref_x, self._ref_px = nxt[ok], self._ref_x[ok], self._ref_px[ok]
         self._prev_gray = gray
         dt = t - self._prev_t if self._prev_t is not None else 0.0
+        dt_before, self._prev_dt = self._prev_dt, dt
         self._prev_t = t
+        self._followed += 1
         if self.camera.readout <= 0 or not 0 < dt <= 0.2:
             return self._prev_px
-        vel = (self._prev_px - prev) / dt
-        if not self._ref_deskewed:
-            ref = self._ref_px - vel * self.camera.row_offsets(self._ref_px[:, 1])[:, None]
-            self._ref_x, self._ref_deskewed = self._normalised(ref), True
-        return self._prev_px - vel * self.camera.row_offsets(self._prev_px[:, 1])[:, None]
+        cur = self._prev_px
+        # the second-order difference wants evenly spaced frames (a dropped frame: the first-order one)
+        second = prev2 is not None and dt_before is not None and abs(dt_before - dt) < 0.2 * dt
+        vel = (3.0 * cur - 4.0 * prev + prev2) / (2.0 * dt) if second else (cur - prev) / dt
+        vel = self._smooth(cur, vel)
+        second_ref = second and self._followed == 2   # prev2: the reference's own points, prev: the next frame's
+        if not self._ref_deskewed or (second_ref and not self._ref_second):
+            x0 = self._ref_px
+            v0 = (-3.0 * x0 + 4.0 * prev - cur) / (2.0 * dt) if second_ref else (cur - prev) / dt
+            ref = x0 - self._smooth(x0, v0) * self.camera.row_offsets(x0[:, 1])[:, None]
+            self._ref_x, self._ref_deskewed, self._ref_second = self._normalised(ref), True, second_ref
+        return cur - vel * self.camera.row_offsets(cur[:, 1])[:, None]
+
+    def _smooth(self, px: np.ndarray, vel: np.ndarray) -> np.ndarray:
+        """The image velocities `vel` (N,2 pixels/s) at pixels `px` (N,2) replaced by a quadratic field in the
+        image coordinates fitted to them all (a plane's motion field nearly is one): less noise than each
+        point's own."""
+        if len(px) < 12:
+            return vel
+        u = 2.0 * px[:, 0] / self.camera.width - 1.0
+        v = 2.0 * px[:, 1] / self.camera.height - 1.0
+        A = np.column_stack([np.ones_like(u), u, v, u * u, u * v, v * v])
+        return A @ np.linalg.lstsq(A, vel, rcond=None)[0]
 
     def _residuals(self, p: np.ndarray, marker_c, xr: np.ndarray, xc: np.ndarray, fixed_ref: np.ndarray | None):
         """Normalised residuals (in standard deviations) of the joint fit: p = [reference pose, this pose]

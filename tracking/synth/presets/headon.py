@@ -59,6 +59,8 @@ HEADON: dict[str, dict] = {
     "tune_headon": _headon("tune_headon", 341, 441, 8, hfov_deg=62, dist=[-0.07, 0.035, 0.0003, -0.0003, 0.0]),
     "tune_headon_b": _headon("tune_headon_b", 342, 442, 21, hfov_deg=60, dist=[-0.06, 0.03, -0.0004, 0.0002, 0.0],
                              length=0.032, distance=0.68),
+    "tune_headon_c": _headon("tune_headon_c", 353, 453, 30, hfov_deg=61, dist=[-0.068, 0.032, -0.0002, -0.0002, 0.0],
+                             length=0.031, distance=0.69),
     "test_headon": _headon("test_headon", 141, 241, 14, hfov_deg=61, dist=[-0.065, 0.03, 0.0002, 0.0004, 0.0],
                            distance=0.71),
 }
