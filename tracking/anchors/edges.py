@@ -91,16 +91,11 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
     if len(quads) == 0:
         return out, ok
     h, w = gray.shape
-    # work on float32 samples of just the region the quads cover (a 720p conversion per call is not free)
     r = np.minimum(np.maximum(0.45 * cell_px, 1.5), 5.0)  # (M,) the search's reach across each edge
-    reach = float(r.max()) + 3.0
-    x0 = int(max(np.floor(quads[..., 0].min() - reach), 0))
-    y0 = int(max(np.floor(quads[..., 1].min() - reach), 0))
-    x1 = int(min(np.ceil(quads[..., 0].max() + reach) + 1, w))
-    y1 = int(min(np.ceil(quads[..., 1].max() + reach) + 1, h))
-    if x1 <= x0 or y1 <= y0:
+    crop = _crop(gray, quads, float(r.max()) + 3.0)
+    if crop is None:
         return out, ok
-    img = gray[y0:y1, x0:x1].astype(np.float32)
+    img, x0, y0 = crop
     edge, valid, contrast = _edge_samples(img, x0, y0, w, h, quads, r, end_margin, min_contrast)
     # Lines for all sides at once: undistort every edge point in one call, then a weighted total-least-
     # squares fit per side (weights 0/1 = valid), one pass of outlier rejection.
@@ -129,6 +124,19 @@ def refine_squares(gray: np.ndarray, quads: np.ndarray, cell_px: np.ndarray, cam
     out[good] = corners[good]
     ok[good] = True
     return out, ok
+
+
+def _crop(gray: np.ndarray, quads: np.ndarray, reach: float):
+    """(float32 crop, x0, y0) of the region the quads cover, `reach` px around them, or None when it is empty:
+    the samples are taken from just that region (a 720p conversion per call is not free)."""
+    h, w = gray.shape
+    x0 = int(max(np.floor(quads[..., 0].min() - reach), 0))
+    y0 = int(max(np.floor(quads[..., 1].min() - reach), 0))
+    x1 = int(min(np.ceil(quads[..., 0].max() + reach) + 1, w))
+    y1 = int(min(np.ceil(quads[..., 1].max() + reach) + 1, h))
+    if x1 <= x0 or y1 <= y0:
+        return None
+    return gray[y0:y1, x0:x1].astype(np.float32), x0, y0
 
 
 def _edge_samples(img, x0: int, y0: int, w: int, h: int, quads: np.ndarray, r: np.ndarray, end_margin,

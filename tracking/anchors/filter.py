@@ -115,19 +115,10 @@ class PoseFilter:
         b = self._velocity_gain(a)
         dp, dr, dv, dw = a * e_p, a * e_r, b * e_p, b * e_r
         if centre is not None and self.n >= 1:
-            off = pred[:3, 3] - np.asarray(centre, dtype=np.float64)
-            dist = float(np.linalg.norm(off))
-            if dist > 1e-6:
-                u = off / dist
-                # the orbit mode's part of the innovation: the camera's move across the line of sight and
-                # the turn w_o = u x e_perp / dist that keeps the centre where it was in the image
-                e_perp = e_p - (e_p @ u) * u
-                w_o = np.cross(u, e_perp) / dist
-                ao, bo = self._orbit_gains(u, dist, dt, m, sigma, weight, surprise, a, b)
-                dp = a * (e_p - e_perp) + ao * e_perp
-                dr = a * (e_r - w_o) + ao * w_o
-                dv = b * (e_p - e_perp) + bo * e_perp
-                dw = b * (e_r - w_o) + bo * w_o
+            orbit = self._orbit_steps(pred[:3, 3] - np.asarray(centre, dtype=np.float64), e_p, e_r,
+                                      (dt, m, sigma, weight, surprise, a, b))
+            if orbit is not None:
+                dp, dr, dv, dw = orbit
         self.p = pred[:3, 3] + dp
         self.R = _exp(dr) @ pred[:3, :3]
         self.n += 1
@@ -146,6 +137,23 @@ class PoseFilter:
             self.w = self.w + dw / dt
         self.t = t
         return self.pose()
+
+    def _orbit_steps(self, off: np.ndarray, e_p: np.ndarray, e_r: np.ndarray, gains_args: tuple):
+        """The update's steps (dp, dr, dv, dw) with the orbit mode about the target's centre (`off`: the
+        predicted camera position from it, metres) given its own gains (`_orbit_gains(u, dist, *gains_args)`,
+        whose last two are the plain gains a, b); None at the centre itself."""
+        dist = float(np.linalg.norm(off))
+        if dist <= 1e-6:
+            return None
+        a, b = gains_args[-2], gains_args[-1]
+        u = off / dist
+        # the orbit mode's part of the innovation: the camera's move across the line of sight and
+        # the turn w_o = u x e_perp / dist that keeps the centre where it was in the image
+        e_perp = e_p - (e_p @ u) * u
+        w_o = np.cross(u, e_perp) / dist
+        ao, bo = self._orbit_gains(u, dist, *gains_args)
+        return (a * (e_p - e_perp) + ao * e_perp, a * (e_r - w_o) + ao * w_o,
+                b * (e_p - e_perp) + bo * e_perp, b * (e_r - w_o) + bo * w_o)
 
     def _gain(self, fc: float, dt: float, m: float, sigma: float | None, weight: float) -> float:
         """Position/orientation gain for cutoff `fc` (Hz) over `dt` (s), raised toward 1 - (3 sigma / m)^2

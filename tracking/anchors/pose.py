@@ -109,19 +109,8 @@ def solve_pose(observations: list[Observation], world_from_anchor: list[np.ndarr
     """
     if not observations:
         return None
-    worlds, imgs, groups = [], [], []
-    hyps = []
-    for k, ob in enumerate(observations):
-        wfa = world_from_anchor[ob.anchor]
-        worlds.append(ob.obj @ wfa[:3, :3].T + wfa[:3, 3])
-        imgs.append(ob.img)
-        groups.append(ob.groups + 1_000_000 * (ob.anchor + 1))
-        afw = invert(wfa)
-        hyps += [cfa @ afw for cfa in planar_solutions(ob, camera)]
+    world, img, group, groups, hyps = _stack(observations, world_from_anchor, camera)
     n_planar = len(hyps)
-    world = np.concatenate(worlds)
-    img = np.concatenate(imgs)
-    group = np.concatenate(groups)
     if len(world) < 4:
         return None
     if not hyps and predicted_camera_from_world is not None:
@@ -138,14 +127,46 @@ def solve_pose(observations: list[Observation], world_from_anchor: list[np.ndarr
         Rp = predicted_camera_from_world[:3, :3]
         ang = np.degrees([rotation_angle(h[:3, :3] @ Rp.T) for h in hyps])
         best = int(np.argmin(costs / pixel_sigma ** 2 + (ang / motion_sigma_deg) ** 2))
-    pose = hyps[best]
+    fitted = _fit_inliers(camera, hyps[best], errors[best], world, img, group, outlier_px,
+                          keep_branch=predicted_camera_from_world is not None)
+    if fitted is None:
+        return None
+    pose, inl = fitted
+    r = residuals(camera, pose, world[inl], img[inl])
+    rms = float(np.sqrt(np.mean(r ** 2)))
+    markers, anchors = _count_used(observations, groups, set(group[inl].tolist()))
+    return PoseSolution(pose, world[inl], img[inl], inl, rms, markers, anchors, branches)
+
+
+def _stack(observations: list[Observation], world_from_anchor: list[np.ndarray], camera: Camera):
+    """All observations' points stacked: world points (N,3, metres), image points (N,2, px), each point's group
+    (marker id made unique across anchors), the groups per observation, and both IPPE hypotheses
+    (camera_from_world) of every observation that has its own."""
+    worlds, imgs, groups = [], [], []
+    hyps = []
+    for ob in observations:
+        wfa = world_from_anchor[ob.anchor]
+        worlds.append(ob.obj @ wfa[:3, :3].T + wfa[:3, 3])
+        imgs.append(ob.img)
+        groups.append(ob.groups + 1_000_000 * (ob.anchor + 1))
+        afw = invert(wfa)
+        hyps += [cfa @ afw for cfa in planar_solutions(ob, camera)]
+    return np.concatenate(worlds), np.concatenate(imgs), np.concatenate(groups), groups, hyps
+
+
+def _fit_inliers(camera: Camera, pose: np.ndarray, first_errors: np.ndarray, world: np.ndarray, img: np.ndarray,
+                 group: np.ndarray, outlier_px: float, keep_branch: bool):
+    """Two passes of inlier selection (`outlier_px`, then 4 robust sigmas within [1 px, outlier_px]; whole
+    markers dropped when most of their corners are out) and LM refinement from the chosen hypothesis `pose`
+    (`first_errors` its residuals). `keep_branch`: refuse a refinement that turns 4 degrees or more (LM
+    sliding into the other IPPE minimum). Returns (pose, inlier mask) or None when fewer than 4 points stay."""
     inl = np.ones(len(world), bool)
     # per point: its group; per group: its size (whole markers are dropped when most of their corners are out)
     _, group_of, group_size = np.unique(group, return_inverse=True, return_counts=True)
     small = group_size <= 4
     for thresh in (outlier_px, None):
         # (the first pass's errors are the chosen hypothesis's, already at hand)
-        r = errors[best] if thresh is not None else residuals(camera, pose, world, img)
+        r = first_errors if thresh is not None else residuals(camera, pose, world, img)
         if thresh is None:
             # second pass: a data-driven threshold (4 robust sigmas), never below 1 px nor above outlier_px
             sigma = 1.4826 * median(r[inl]) if inl.any() else outlier_px
@@ -159,19 +180,19 @@ def solve_pose(observations: list[Observation], world_from_anchor: list[np.ndarr
         refined = refine_lm(camera, pose, world[inl], img[inl])
         # A near-degenerate view (a small frontal marker) may have no second minimum: LM would then slide
         # from the chosen branch into the other one, i.e. flip after all. Keep the chosen solution then.
-        if predicted_camera_from_world is None or \
-                np.degrees(rotation_angle(refined[:3, :3] @ pose[:3, :3].T)) < 4.0:
+        if not keep_branch or np.degrees(rotation_angle(refined[:3, :3] @ pose[:3, :3].T)) < 4.0:
             pose = refined
-    r = residuals(camera, pose, world[inl], img[inl])
-    rms = float(np.sqrt(np.mean(r ** 2)))
-    used = set(group[inl].tolist())
+    return pose, inl
+
+
+def _count_used(observations: list[Observation], groups: list[np.ndarray], used: set) -> tuple[int, list[int]]:
+    """Markers and anchors (sorted indices) with inlier points: boards count their markers; ChArUco corners
+    count as the markers that located them."""
     markers = 0
     anchors = set()
     for ob, g in zip(observations, groups):
         hit = {x for x in g.tolist() if x in used}
         if hit:
             anchors.add(ob.anchor)
-            # boards count their markers; ChArUco corners count as the markers that located them
             markers += ob.markers if (ob.groups < 0).all() else len(hit)
-    anchors = sorted(anchors)
-    return PoseSolution(pose, world[inl], img[inl], inl, rms, markers, anchors, branches)
+    return markers, sorted(anchors)

@@ -10,6 +10,7 @@ import numpy as np
 
 from tracking.anchors.blur import MIN_MARKERS, fit_pose_and_stretch, marker_groups, marker_offsets, spread_enough
 from tracking.anchors.desk import DeskPlane
+from tracking.anchors.deskew import deskew_observation
 from tracking.anchors.detect import ArucoDetection, Observation
 from tracking.anchors.edges import edge_sharpness
 from tracking.anchors.filter import PoseFilter
@@ -246,6 +247,24 @@ class AnchorTracker:
         self._tracked_only = False
         fast = self._moving_fast(pred_cfw)
         ref_cfw = invert(reference) if reference is not None else pred_cfw
+        obs, rejected, covered, sol = self._observe(gray, t, pred_cfw, ref_cfw, fast)
+        self.frame += 1
+        res = AnchorResult()
+        desk = self._desk_update(gray, t, obs, sol)
+        if sol is not None:
+            self._measure(res, gray, t, obs, sol, covered, desk)
+        else:
+            self.tracked_keys = set()
+        res.rejected = rejected
+        self.ambiguous = res.ambiguous
+        res.ms = (time.perf_counter() - t0) * 1000.0
+        return res
+
+    def _observe(self, gray, t: float, pred_cfw, ref_cfw, fast: bool):
+        """This frame's anchor observations and their pose: detected (or re-found where `pred_cfw` puts them,
+        detected properly when that disagrees), screened (new anchors against `ref_cfw`, covered margins),
+        deskewed to the centre row's time, solved, the IPPE branch switched when the image has favoured the
+        other for a while, and unstretched along a smear. Returns (obs, rejected, covered, solution or None)."""
         aruco_obs = self._detect_aruco(gray, pred_cfw, fast)
         qr_obs = self.qr.process(gray, pred_cfw, self._expected_qr(pred_cfw)) if self.qr.models else []
         obs, rejected = self._screen_new(aruco_obs + qr_obs, ref_cfw)
@@ -268,61 +287,56 @@ class AnchorTracker:
             self.filter.reset()
         if sol is not None and self.unblur_px is not None:
             sol = self._unstretch(obs, sol)
-        self.frame += 1
-        res = AnchorResult()
-        desk = self._desk_update(gray, t, obs, sol)
-        if sol is not None:
-            raw = sol.world_from_camera if desk is None or not desk.decided else invert(desk.camera_from_world)
-            depth = float(median((sol.world @ sol.camera_from_world[:3, :3].T + sol.camera_from_world[:3, 3])[:, 2]))
-            # The measurement's noise in radians: pixel noise (the residual corrected for the 6 pose
-            # parameters, at least 0.1 px) over the points' extent, times the lever f/extent that makes
-            # out-of-plane tilt and depth of a small target uncertain, fewer with more points.
-            n = len(sol.img)
-            extent = max(float(np.linalg.norm(np.ptp(sol.img, axis=0))), 1.0)
-            px_sigma = max(sol.rms * np.sqrt(2 * n / max(2 * n - 6, 1)), 0.1)
-            lever = np.sqrt(1.0 + (self.camera.fx / extent) ** 2)
-            sigma = 2.0 * px_sigma / extent * lever / np.sqrt(max(n / 4.0, 1.0))
-            covered = covered and bool(covered & set(sol.anchors))
-            res.refitted = bool(self._refit_now & set(sol.anchors))
-            cover = (self.cover_weight if covered else 1.0) * (self.refit_weight if res.refitted else 1.0)
-            smear = self._smear_weight(gray, sol, raw)
-            if smear < 1.0 and 2.0 * sigma < self._state_sigma:
-                # the filter's state rests on measurements far noisier than this one (a board's few markers
-                # at the image edge as it came back into view): smeared or not, this one counts in full
-                smear = 1.0
-            weight = smear * self._cover_relax(t, cover)
-            # a pose on one square's four corners (a lone marker) shows the orbit mode about their centre
-            # far worse than the rest: the filter gives that mode its own, lower gain (filter.py)
-            centre = np.mean(sol.world, axis=0) if n <= 4 else None
-            if desk is not None and desk.decided:
-                # the desk's keypoints hold the tilt the corners cannot: the measurement is as good as its fit
-                sigma, centre = max(desk.sigma, 1e-4), None
-            res.ambiguous = desk is not None and not desk.decided or (desk is None and self._desk_undecided())
-            res.desk = desk is not None and desk.decided
-            filt = self.filter.update(raw, t, depth, sigma, weight=weight, centre=centre)
-            filt = self._hold_to_corners(filt, raw, sol.world, px_sigma / max(weight, 1e-3))
-            # (a restart leaves the state on this measurement alone; a down-weighted one counts as noisier)
-            self._state_sigma = (sigma if self.filter.n == 0
-                                 else min(self._state_sigma, sigma / max(weight, 1e-3)))
-            self.trusted.update(sol.anchors)
-            res.covered = bool(covered)
-            res.raw_world_from_camera = raw
-            res.world_from_camera = filt if self.filter_enabled else raw
-            res.markers = sol.markers
-            res.inliers = int(len(sol.world))
-            res.reprojection_error = sol.rms
-            res.object_points = sol.world
-            res.image_points = sol.img
-            res.anchors_seen = sol.anchors
-            self.last_raw = raw
-            self.tracked_keys = {(ob.anchor, g) for ob in obs if ob.anchor in sol.anchors
-                                 and self.models[ob.anchor].anchor_kind.detector == "aruco" for g in ob.groups.tolist()}
-        else:
-            self.tracked_keys = set()
-        res.rejected = rejected
-        self.ambiguous = res.ambiguous
-        res.ms = (time.perf_counter() - t0) * 1000.0
-        return res
+        return obs, rejected, covered, sol
+
+    def _measure(self, res: AnchorResult, gray, t: float, obs: list[Observation], sol, covered, desk) -> None:
+        """Fill `res` from the frame's solution `sol` (and the desk's fit `desk`): the raw pose, the filter's
+        update with the measurement's noise (radians) and weight, held to the corners."""
+        raw = sol.world_from_camera if desk is None or not desk.decided else invert(desk.camera_from_world)
+        depth = float(median((sol.world @ sol.camera_from_world[:3, :3].T + sol.camera_from_world[:3, 3])[:, 2]))
+        # The measurement's noise in radians: pixel noise (the residual corrected for the 6 pose
+        # parameters, at least 0.1 px) over the points' extent, times the lever f/extent that makes
+        # out-of-plane tilt and depth of a small target uncertain, fewer with more points.
+        n = len(sol.img)
+        extent = max(float(np.linalg.norm(np.ptp(sol.img, axis=0))), 1.0)
+        px_sigma = max(sol.rms * np.sqrt(2 * n / max(2 * n - 6, 1)), 0.1)
+        lever = np.sqrt(1.0 + (self.camera.fx / extent) ** 2)
+        sigma = 2.0 * px_sigma / extent * lever / np.sqrt(max(n / 4.0, 1.0))
+        covered = covered and bool(covered & set(sol.anchors))
+        res.refitted = bool(self._refit_now & set(sol.anchors))
+        cover = (self.cover_weight if covered else 1.0) * (self.refit_weight if res.refitted else 1.0)
+        smear = self._smear_weight(gray, sol, raw)
+        if smear < 1.0 and 2.0 * sigma < self._state_sigma:
+            # the filter's state rests on measurements far noisier than this one (a board's few markers
+            # at the image edge as it came back into view): smeared or not, this one counts in full
+            smear = 1.0
+        weight = smear * self._cover_relax(t, cover)
+        # a pose on one square's four corners (a lone marker) shows the orbit mode about their centre
+        # far worse than the rest: the filter gives that mode its own, lower gain (filter.py)
+        centre = np.mean(sol.world, axis=0) if n <= 4 else None
+        if desk is not None and desk.decided:
+            # the desk's keypoints hold the tilt the corners cannot: the measurement is as good as its fit
+            sigma, centre = max(desk.sigma, 1e-4), None
+        res.ambiguous = desk is not None and not desk.decided or (desk is None and self._desk_undecided())
+        res.desk = desk is not None and desk.decided
+        filt = self.filter.update(raw, t, depth, sigma, weight=weight, centre=centre)
+        filt = self._hold_to_corners(filt, raw, sol.world, px_sigma / max(weight, 1e-3))
+        # (a restart leaves the state on this measurement alone; a down-weighted one counts as noisier)
+        self._state_sigma = (sigma if self.filter.n == 0
+                             else min(self._state_sigma, sigma / max(weight, 1e-3)))
+        self.trusted.update(sol.anchors)
+        res.covered = bool(covered)
+        res.raw_world_from_camera = raw
+        res.world_from_camera = filt if self.filter_enabled else raw
+        res.markers = sol.markers
+        res.inliers = int(len(sol.world))
+        res.reprojection_error = sol.rms
+        res.object_points = sol.world
+        res.image_points = sol.img
+        res.anchors_seen = sol.anchors
+        self.last_raw = raw
+        self.tracked_keys = {(ob.anchor, g) for ob in obs if ob.anchor in sol.anchors
+                             and self.models[ob.anchor].anchor_kind.detector == "aruco" for g in ob.groups.tolist()}
 
     def _desk_update(self, gray, t: float, obs: list[Observation], sol):
         """The desk's fit (`desk.DeskPlane.update`) when a lone square marker carries the pose and its two IPPE
@@ -414,28 +428,11 @@ class AnchorTracker:
             return obs
         out = []
         for ob, keys in zip(obs, keys_of):
-            seen = np.array([k in prev for k in keys])
-            if seen.sum() < 3:
-                out.append(ob)
-                continue
-            img = np.asarray(ob.img, float)
-            vel = (img[seen] - np.array([prev[k] for k, s in zip(keys, seen) if s])) / dt
-            X = np.column_stack([img[seen], np.ones(int(seen.sum()))])
-            A, *_ = np.linalg.lstsq(X, vel, rcond=None)
-            img1 = np.column_stack([img, np.ones(len(img))])
-            vel_all = img1 @ A
-            self._fields[ob.anchor] = (A, dt)
-            before = self._prev_fields.get(ob.anchor)
-            d = cam.row_offsets(img[:, 1])
-            if before is not None and seen.sum() >= self.deskew_extrapolate_min:
-                # the difference is the velocity at t - dt/2 + d (both detections were read at the point's
-                # row, d after their frame time); the stretch the point is moved back over, from t + d to
-                # t, needs it at its middle, t + d/2: (dt - d)/2 later. The change from the last frame's
-                # difference, (dt + dt_before)/2 earlier, carries it on there.
-                vel_before = img1 @ before[0]
-                vel_all = vel_all + ((dt - d) / (dt + before[1]))[:, None] * (vel_all - vel_before)
-            out.append(Observation(ob.anchor, ob.obj, img - vel_all * d[:, None], ob.groups, ob.markers,
-                                   square=ob.square))
+            moved, field = deskew_observation(cam, ob, keys, prev, dt, self._prev_fields.get(ob.anchor),
+                                              self.deskew_extrapolate_min)
+            if field is not None:
+                self._fields[ob.anchor] = field
+            out.append(moved)
         return out
 
     def _screen_new(self, obs: list[Observation], ref_cfw: np.ndarray | None) -> tuple[list[Observation], list[int]]:
