@@ -83,6 +83,8 @@ def main(argv=None) -> int:
         print(f"bench: {name} ...", flush=True)
         spec = importlib.util.spec_from_file_location(f"bench_{name}", found[name])
         module = importlib.util.module_from_spec(spec)
+        # registered under its name, so what it hands to worker processes (functions it defines) pickles
+        sys.modules[spec.name] = module
         t0 = time.perf_counter()
         try:
             spec.loader.exec_module(module)
