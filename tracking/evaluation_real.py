@@ -24,6 +24,7 @@ import numpy as np
 
 from tracking.anchors.dictionaries import aruco_dictionary
 from tracking.camera import Camera
+from tracking.fusion import Tracker
 from tracking.poses import invert, to_rvec_tvec
 from tracking.anchors.kinds import AnchorSpec
 
@@ -160,8 +161,6 @@ def track_frames(camera: Camera, anchors: list[AnchorSpec], frames: Iterable[tup
                  slam: bool = True, **settings) -> Iterator[tuple[int, np.ndarray, np.ndarray | None]]:
     """(index, grey image, world_from_camera or None) of arapp's Tracker over (t seconds, BGR image) frames,
     as `arapp replay` runs it (`slam` False: `--no-slam`); mapping inline (threaded=False) so a run repeats."""
-    from tracking.fusion import Tracker
-
     settings.setdefault("threaded", False)
     tracker = Tracker(camera, anchors, slam=slam, **settings)
     try:

@@ -20,6 +20,7 @@ import numpy as np
 
 from arapp.engine.input_source import open_input
 from arapp.engine.pipeline import Pipeline, load_display_model
+from arapp.engine.scene_run import SceneRun
 from arapp.geometry.placement import Placement
 from arapp.engine.toolpath_overlay import toolpath_overlay
 from tracking.evaluation import evaluate
@@ -182,8 +183,6 @@ def _run_frames(source, pipeline: Pipeline, scene_run, options: ReplayOptions, o
 def _start_scene(pipeline: Pipeline, camera, anchors, options: ReplayOptions, say):
     """The run's SceneRun: `options.scene` loaded into the tracker (SceneError when unusable), and its first
     model shown when the replay names none."""
-    from arapp.engine.scene_run import SceneRun
-
     run = SceneRun.start(pipeline.tracker, camera, [a.to_dict() for a in anchors], load=options.scene)
     if options.scene and say is not None:
         s = run.summary()

@@ -39,7 +39,7 @@ def score_recording(recording: str | Path, mode: str = "depth",
                     params: occlusion.OcclusionParams = occlusion.DEFAULT_PARAMS,
                     timing: bool = False) -> OcclusionScore:
     """Score `mode` ("depth" or "plane") on an occlusion recording (see the module docstring)."""
-    from arapp.render import OverlayRenderer
+    from arapp.render import OverlayRenderer   # PyOpenGL binds its platform on import: only when scoring
 
     rec = Path(recording)
     session = load_session(rec)

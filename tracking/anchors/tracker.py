@@ -11,6 +11,7 @@ import numpy as np
 from tracking.anchors.blur import MIN_MARKERS, fit_pose_and_stretch, marker_groups, marker_offsets, spread_enough
 from tracking.anchors.desk import DeskPlane
 from tracking.anchors.deskew import deskew_observation
+from tracking.anchors.diagnose import diagnose as diagnose_image
 from tracking.anchors.detect import ArucoDetection, Observation
 from tracking.anchors.edges import edge_sharpness
 from tracking.anchors.filter import PoseFilter
@@ -590,5 +591,4 @@ class AnchorTracker:
 
     def diagnose(self, image: np.ndarray) -> list[str]:
         """Plain-language reasons why the anchors are not (or badly) found in this image; [] when all is well."""
-        from tracking.anchors.diagnose import diagnose
-        return diagnose(self.anchors, self.camera, image)
+        return diagnose_image(self.anchors, self.camera, image)

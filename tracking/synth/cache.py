@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import inspect
 import json
 import os
 import shutil
@@ -22,6 +23,14 @@ import tempfile
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+import cv2
+import numpy as np
+
+from tracking.recording.writer import RecordingWriter
+from tracking.synth import synthesize
+from tracking.synth.presets import preset
+from tracking.synth.scene import parse_scene
 
 SOURCE_ROOT = Path(__file__).resolve().parents[2]
 # the bundled recordings (a source checkout's recordings/ folder)
@@ -36,7 +45,7 @@ def cache_root() -> Path:
         return Path(os.environ[CACHE_ENV])
     if BUNDLED.is_dir():
         return SOURCE_ROOT / ".cache" / "recordings"
-    import platformdirs
+    import platformdirs   # only for an installed copy without the source tree's recordings/
 
     return platformdirs.user_cache_path("arapp") / "recordings"
 
@@ -45,13 +54,6 @@ def cache_root() -> Path:
 def renderer_fingerprint() -> str:
     """A hash of what turns a scene into a recording's bytes: tracking/synth's source (the presets left out:
     a preset's own JSON is hashed with it), the recording writer's source, OpenCV's and NumPy's versions."""
-    import inspect
-
-    import cv2
-    import numpy as np
-
-    from tracking.recording.writer import RecordingWriter
-
     h = hashlib.sha256()
     here = Path(__file__).resolve().parent
     # (the presets package, a folder, is not among them)
@@ -81,7 +83,7 @@ def file_lock(path: Path) -> Iterator[None]:
     """An exclusive lock on `path` across processes (flock; no lock where flock does not exist)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     try:
-        import fcntl
+        import fcntl   # POSIX only
     except ImportError:  # not POSIX: one process at a time is then the caller's business
         yield
         return
@@ -96,10 +98,6 @@ def file_lock(path: Path) -> Iterator[None]:
 def cached_recording(name: str, root: Path | None = None,
                      progress: Callable[[int, int], None] | None = None) -> Path:
     """The folder of preset `name` rendered into the cache (rendered now when it is not there yet)."""
-    from tracking.synth import synthesize
-    from tracking.synth.presets import preset
-    from tracking.synth.scene import parse_scene
-
     data = preset(name)   # a clear error for an unknown name
     root = cache_root() if root is None else Path(root)
     folder = root / f"{name}-{scene_key(data)}"

@@ -12,11 +12,16 @@ truths are in one world frame: the first session's anchor frame. The sets' seeds
 
 from __future__ import annotations
 
+import hashlib
+import json
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from tracking.synth.scene import parse_scene
 
 MILD_DIST = [-0.08, 0.04, 0.0005, -0.0005, 0.0]
 # bare: the marker removed; wide: from views beyond the mapped ones (azimuth up to 20 degrees past the first
@@ -126,12 +131,8 @@ def revisit_folder(name: str, cache: str | Path) -> Path:
     """The recording folder of revisit scene `name` under `cache` (e.g. build/synth), rendered on first use
     under a name holding a hash of its scene (a changed scene renders anew); rendered beside it and renamed
     into place, so a half-rendered recording is never found."""
-    import hashlib
-    import json
-    import shutil
-
+    # (tracking.synth's own __init__ imports this module: its synthesize only when a recording is rendered)
     from tracking.synth import synthesize
-    from tracking.synth.scene import parse_scene
 
     data = revisit_by_name(name)
     if data is None:

@@ -223,7 +223,7 @@ def _check_occlusion_and_held(scene: Scene, effects: dict, where: str) -> None:
     """An occlusion block: not with a held card, a global shutter without motion blur, a valid block; a held
     block: valid for the scene's rolling shutter."""
     if scene.occlusion is not None:
-        from tracking.synth.occlusion import check_occlusion
+        from tracking.synth.occlusion import check_occlusion   # (it imports the renderer, which imports this module)
 
         if scene.held is not None:
             raise SessionError(f"{where}.occlusion: not with a held card (held); use a desk scene")

@@ -75,6 +75,7 @@ def _octoprint(target: OctoPrintTarget, profile, job_path) -> PrintLink:
 
 
 def _moonraker(target: MoonrakerTarget, profile, job_path) -> PrintLink:
+    # each backend's HTTP/websocket code is imported only when that backend is used
     from .moonraker import MoonrakerLink
     from .webapi import load_api_key
 
@@ -85,6 +86,7 @@ def _moonraker(target: MoonrakerTarget, profile, job_path) -> PrintLink:
 
 
 def _prusalink(target: PrusaLinkTarget, profile, job_path) -> PrintLink:
+    # (imported when used, as for Moonraker)
     from .prusalink import PrusaLinkLink
     from .webapi import ApiKeyError, load_api_key
 

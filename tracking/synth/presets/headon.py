@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from tracking.synth.presets.parts import webcam_effects
+from tracking.synth.trajectory import look_at
 
 # A small marker seen nearly head-on over a textured desk (issue 25.4, the planar-ambiguity flip): a 3 cm
 # marker at ~0.7 m, the camera held by hand 2-6 degrees off the marker's normal (a person at the desk's near
@@ -18,8 +19,6 @@ def _headon_keys(seed: int, duration: float, distance: float) -> list[dict]:
     marker, the image's x axis within a few degrees of the desk's (a hand does not spin the camera about
     its axis: look_at alone would, with the view this close to the desk's normal); a new key every ~0.6 s.
     Repeatable for a seed."""
-    from tracking.synth.trajectory import look_at
-
     rng = np.random.default_rng(seed + 2525)
     keys, t = [], 0.0
     rolls = np.radians(np.arange(-180.0, 180.0, 0.25))
