@@ -92,7 +92,7 @@ FILE_SECONDS = {
     "test_slam_sequences.py": 315, "test_synth_recordings.py": 140, "test_anchor_rejection.py": 120,
     "test_slam_fast_motion.py": 118, "test_app_model.py": 115, "test_gui.py": 91, "test_gui_print.py": 81,
     "test_moving_anchor.py": 80, "test_gui_scan.py": 79, "test_link_faults.py": 77, "test_scan.py": 71,
-    "test_gui_habits.py": 61, "test_anchor_border_jitter.py": 60, "test_prusalink_server.py": 45,
+    "test_gui_habits.py": 61, "test_anchor_border_jitter.py": 60, "test_prusalink_server.py": 90,
     "test_realphotos.py": 38, "test_scan_depth.py": 37, "test_moonraker_server.py": 29, "test_realvideo.py": 29,
     "test_gui_printer_setup.py": 28, "test_octoprint_server.py": 27, "test_gui_calibration.py": 27,
     "test_blur_stretch.py": 26, "test_gui_firsthour_window.py": 25, "test_filter_reentry.py": 23,

@@ -74,29 +74,6 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-# PrusaLink's own clocks, shortened for the tests (a fake clock where the real one only makes the tests wait):
-# after a job ends it takes no new one for PRINT_END_TIMEOUT (11 s), and it (re)sends M155 to turn the
-# firmware's temperature reports on from a thread ticking every 10 s, once no report came for
-# REPORTING_TIMEOUT (60 s). Each stays a window the link has to wait out (the second job after a first is
-# still refused for a while, the temperatures still come late), a few seconds instead of a minute. Set before
-# PrusaLink's modules copy the values (`from ..const import ...`).
-PRINT_END_S, TELEMETRY_TICK_S, REPORTING_TIMEOUT_S = 2.0, 3.0, 4.0
-LAUNCHER = f"""
-import sys
-import prusa.link.const as const
-const.PRINT_END_TIMEOUT = {PRINT_END_S}
-const.REPORTING_TIMEOUT = {REPORTING_TIMEOUT_S}
-import prusa.link.printer_adapter.state_manager as state_manager
-import prusa.link.printer_adapter.auto_telemetry as auto_telemetry
-state_manager.PRINT_END_TIMEOUT = {PRINT_END_S}
-auto_telemetry.REPORTING_TIMEOUT = {REPORTING_TIMEOUT_S}
-auto_telemetry.AutoTelemetry.update_interval = {TELEMETRY_TICK_S}
-from prusa.link.__main__ import main
-sys.argv[0] = "prusalink"
-sys.exit(main())
-"""
-
-
 class PrusaLinkServer:
     """PrusaLink in `base` on the pty of `firmware` (a PrusaFirmwarePty); `url`, `api_key`, `storage`."""
 
@@ -113,8 +90,7 @@ class PrusaLinkServer:
         (base / "prusalink.ini").write_text(PRUSALINK_INI.format(data=data, port=self.port, tty=firmware.port,
                                                                    storage=self.storage))
         self._log = open(base / "prusalink.out", "w")
-        self.proc = subprocess.Popen([str(PRUSALINK.with_name("python")), "-c", LAUNCHER, "-f", "-c",
-                                      str(base / "prusalink.ini")],
+        self.proc = subprocess.Popen([str(PRUSALINK), "-f", "-c", str(base / "prusalink.ini")],
                                      stdout=self._log, stderr=subprocess.STDOUT, cwd=data)
 
     def log_tail(self, n: int = 3000) -> str:
