@@ -107,6 +107,8 @@ HELD_MAX_M = 0.03   # issue 25: no frame of a held card placed more than 3 cm of
 
 def _run_watching(tracker, frames, watch):
     """`run_tracker` over `frames`, and `watch(result)` of every frame's TrackResult, in order."""
+    from scenes import run_tracker
+
     seen = []
     orig = tracker.process
 
