@@ -1,7 +1,7 @@
 """Saved scenes (issue 30 part 1): map a desk in one session, save the scene file, then start fresh runs on
 recordings that revisit the desk (another path; another time of day; the marker removed) from that file.
 
-Recordings: tracking.synth.revisits, rendered on first use into build/synth/ (git-ignored, cached by a
+Recordings: tracking.synth.revisits, rendered on first use into the recordings cache (.cache/recordings, git-ignored, cached by a
 hash of the scene). The report is on the `test_scene` set (seeds never used while tuning); the
 `tune_scene` set is what parameters were chosen on (`python benchmarks/bench_scenes.py --set tune_scene`).
 
@@ -26,10 +26,10 @@ GOAL_S, GOAL_M, GOAL_DEG = 1.0, 0.01, 1.0
 
 
 def recording(name: str) -> Path:
-    """The folder of the revisit recording `name`, rendered on first use (build/synth/<name>-<hash>)."""
-    from tracking.synth.revisits import revisit_folder
+    """The folder of the revisit recording `name`, rendered on first use (tracking.synth.cache)."""
+    from tracking.synth.cache import cached_recording
 
-    return revisit_folder(name, ROOT / "build" / "synth")
+    return cached_recording(name)
 
 
 def frames_of(folder: Path):

@@ -189,10 +189,10 @@ def saved_desk(tmp_path_factory):
     """The test set's mapping session tracked and saved as a scene file (the first session)."""
     from arapp.engine.scene_run import SceneRun
     from scenes import load_recording
-    from tracking.synth.revisits import revisit_folder
+    from tracking.synth.cache import cached_recording
     from tracking.fusion import Tracker
 
-    frames, session = load_recording(revisit_folder("test_scene_map", ROOT / "build" / "synth"))
+    frames, session = load_recording(cached_recording("test_scene_map"))
     path = tmp_path_factory.mktemp("scene") / "desk.arscene"
     with Tracker(session.camera, session.anchors, slam=True) as tr:
         run = SceneRun.start(tr, session.camera, [a.to_dict() for a in session.anchors])
@@ -207,10 +207,10 @@ def saved_desk(tmp_path_factory):
 def _revisit(name: str, scene_path, frames: int = 12):
     from arapp.engine.scene_run import SceneRun
     from scenes import load_recording
-    from tracking.synth.revisits import revisit_folder
+    from tracking.synth.cache import cached_recording
     from tracking.fusion import Tracker
 
-    data, session = load_recording(revisit_folder(name, ROOT / "build" / "synth"), slice(0, frames))
+    data, session = load_recording(cached_recording(name), slice(0, frames))
     out = []
     with Tracker(session.camera, session.anchors, slam=True) as tr:
         run = SceneRun.start(tr, session.camera, [a.to_dict() for a in session.anchors], load=scene_path)
@@ -260,7 +260,7 @@ def test_a_moved_marker_is_reported(saved_desk, tmp_path):
     marker by about that much, and the run says so."""
     from arapp.engine.scene_run import SceneRun
     from scenes import load_recording
-    from tracking.synth.revisits import revisit_folder
+    from tracking.synth.cache import cached_recording
     from tracking.fusion import Tracker
 
     scene = read_scene(saved_desk)
@@ -271,7 +271,7 @@ def test_a_moved_marker_is_reported(saved_desk, tmp_path):
     arrays["kf_pose"] = shift @ arrays["kf_pose"]
     moved = write_scene(tmp_path / "moved.arscene", SceneFile(scene.camera, scene.anchors, [],
                                                               map_from_arrays(arrays)))
-    data, session = load_recording(revisit_folder("test_scene_revisit_0_evening", ROOT / "build" / "synth"),
+    data, session = load_recording(cached_recording("test_scene_revisit_0_evening"),
                                    slice(0, 8))
     with Tracker(session.camera, session.anchors, slam=True) as tr:
         run = SceneRun.start(tr, session.camera, [a.to_dict() for a in session.anchors], load=moved)
@@ -302,10 +302,10 @@ def test_gui_tracks_against_a_scene_without_the_marker_and_saves_it_on_request(q
     (history grows by one) and the last scene is remembered for File > Reopen last scene."""
     from arapp.store import user_config
     from tracking.poses import read_tum
-    from tracking.synth.revisits import revisit_folder
+    from tracking.synth.cache import cached_recording
 
     w = threads_window
-    rec = revisit_folder("test_scene_revisit_1_bare", ROOT / "build" / "synth")
+    rec = cached_recording("test_scene_revisit_1_bare")
     model = ROOT / "models" / "vase.json"
     placed = {"size_mm": 37.0, "offset": [5.0, -3.0, 0.0], "rotation_deg": [0.0, 0.0, 20.0]}
     first = read_scene(saved_desk)
@@ -337,9 +337,9 @@ def test_replay_saves_a_scene_then_starts_from_it_and_refuses_a_bad_one_in_one_l
     """`arapp replay --save-scene` writes the scene with the model and placement; `--scene` starts from it
     (report.json says how the first pose came); a corrupt scene file: one line, exit 2, no --out, file kept."""
     from arapp.cli import main
-    from tracking.synth.revisits import revisit_folder
+    from tracking.synth.cache import cached_recording
 
-    rec = revisit_folder("test_scene_revisit_0_bare", ROOT / "build" / "synth")
+    rec = cached_recording("test_scene_revisit_0_bare")
     first = read_scene(saved_desk)
     scene = write_scene(tmp_path / "desk.arscene", SceneFile(first.camera, first.anchors, [
         {"path": str(ROOT / "models" / "vase.json"), "placement": {"size_mm": 33.0}}], first.map))
@@ -367,12 +367,13 @@ def test_revisits_share_the_desk_and_world_and_bare_ones_have_no_marker():
 
     from scenes import load_recording
     from tracking.synth import scene_from_arg
-    from tracking.synth.revisits import SETS, revisit_folder
+    from tracking.synth.cache import cached_recording
+    from tracking.synth.revisits import SETS
 
     det = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
     found = {}
     for name in ("test_scene_revisit_0_evening", "test_scene_revisit_0_bare"):
-        frames, _ = load_recording(revisit_folder(name, ROOT / "build" / "synth"), slice(0, 1))
+        frames, _ = load_recording(cached_recording(name), slice(0, 1))
         _, ids, _ = det.detectMarkers(cv2.cvtColor(frames[0][1], cv2.COLOR_BGR2GRAY))
         found[name] = [] if ids is None else ids.ravel().tolist()
     assert found == {"test_scene_revisit_0_evening": [21], "test_scene_revisit_0_bare": []}
@@ -388,7 +389,7 @@ def test_revisits_share_the_desk_and_world_and_bare_ones_have_no_marker():
 
 def test_gui_says_when_the_marker_and_the_saved_scene_disagree(qtbot, threads_window, saved_desk, tmp_path):
     """A scene whose map sits 3 cm off the marker (the marker moved since): the window shows it, once."""
-    from tracking.synth.revisits import revisit_folder
+    from tracking.synth.cache import cached_recording
 
     scene = read_scene(saved_desk)
     arrays = map_to_arrays(scene.map)
@@ -398,7 +399,7 @@ def test_gui_says_when_the_marker_and_the_saved_scene_disagree(qtbot, threads_wi
                                                               map_from_arrays(arrays)))
     w = threads_window
     w.session.scenes.open(str(moved))
-    w.open_source(str(revisit_folder("test_scene_revisit_0_evening", ROOT / "build" / "synth")))
+    w.open_source(str(cached_recording("test_scene_revisit_0_evening")))
     qtbot.waitUntil(lambda: any("disagree" in t for t, _ in w.session.errors), timeout=60_000)
     (title, message), = [e for e in w.session.errors if "disagree" in e[0]]
     assert "cm" in message and "moved" in message

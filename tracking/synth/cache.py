@@ -30,6 +30,7 @@ import numpy as np
 from tracking.recording.writer import RecordingWriter
 from tracking.synth import synthesize
 from tracking.synth.presets import preset
+from tracking.synth.revisits import revisit_by_name
 from tracking.synth.scene import parse_scene
 
 SOURCE_ROOT = Path(__file__).resolve().parents[2]
@@ -97,8 +98,8 @@ def file_lock(path: Path) -> Iterator[None]:
 
 def cached_recording(name: str, root: Path | None = None,
                      progress: Callable[[int, int], None] | None = None) -> Path:
-    """The folder of preset `name` rendered into the cache (rendered now when it is not there yet)."""
-    data = preset(name)   # a clear error for an unknown name
+    """The folder of preset (or scene revisit, tracking.synth.revisits) `name` rendered into the cache (rendered now when it is not there yet)."""
+    data = revisit_by_name(name) or preset(name)   # preset(): a clear error for an unknown name
     root = cache_root() if root is None else Path(root)
     folder = root / f"{name}-{scene_key(data)}"
     with file_lock(root / f".{name}.lock"):

@@ -12,16 +12,9 @@ truths are in one world frame: the first session's anchor frame. The sets' seeds
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
-import shutil
-import tempfile
-from pathlib import Path
 
 import numpy as np
 
-from tracking.synth.scene import parse_scene
 
 MILD_DIST = [-0.08, 0.04, 0.0005, -0.0005, 0.0]
 # bare: the marker removed; wide: from views beyond the mapped ones (azimuth up to 20 degrees past the first
@@ -125,30 +118,3 @@ def revisit_by_name(name: str) -> dict | None:
             if index.isdigit() and variant in VARIANTS:
                 return revisit_scene(set_name, int(index), variant)
     return None
-
-
-def revisit_folder(name: str, cache: str | Path) -> Path:
-    """The recording folder of revisit scene `name` under `cache` (e.g. build/synth), rendered on first use
-    under a name holding a hash of its scene (a changed scene renders anew); rendered beside it and renamed
-    into place, so a half-rendered recording is never found."""
-    # (tracking.synth's own __init__ imports this module: its synthesize only when a recording is rendered)
-    from tracking.synth import synthesize
-
-    data = revisit_by_name(name)
-    if data is None:
-        raise ValueError(f"no revisit scene {name!r} (names: <set>_map, <set>_revisit_<i>_<variant>; "
-                         f"sets {', '.join(SETS)}, variants {', '.join(VARIANTS)})")
-    digest = hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:10]
-    folder = Path(cache) / f"{name}-{digest}"
-    if not (folder / "groundtruth.tum").is_file():
-        folder.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
-        try:
-            synthesize(parse_scene(data, name), tmp, force=True)
-            if folder.exists():
-                shutil.rmtree(folder)
-            os.replace(tmp, folder)
-        except BaseException:
-            shutil.rmtree(tmp, ignore_errors=True)
-            raise
-    return folder
