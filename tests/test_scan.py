@@ -11,7 +11,6 @@ and `arapp model info` as the consumers.
 from __future__ import annotations
 
 import json
-import os
 import threading
 
 import numpy as np
