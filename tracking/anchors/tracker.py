@@ -9,6 +9,7 @@ import time
 import numpy as np
 
 from tracking.anchors.blur import MIN_MARKERS, fit_pose_and_stretch, marker_groups, marker_offsets, spread_enough
+from tracking.anchors.card import CardPoints
 from tracking.anchors.desk import DeskPlane
 from tracking.anchors.deskew import deskew_observation
 from tracking.anchors.diagnose import diagnose as diagnose_image
@@ -25,6 +26,7 @@ from tracking.anchors.qr import QRTracking
 from tracking.anchors.result import AnchorResult
 from tracking.camera import Camera
 from tracking.poses import invert, rotation_angle, transform_points
+from tracking.slam.frame_pose import position_spread
 from tracking.anchors.kinds import AnchorSpec
 
 
@@ -128,6 +130,9 @@ class AnchorTracker:
         self.branch_decay = float(branch_decay)
         self.branch_switch = float(branch_switch)
         self.desk = DeskPlane(camera) if desk else None
+        # the card a lone marker is printed on (card.py): its points followed while the caller sets it, and its
+        # fit the frame's measurement once the caller says the marker moves in the room (`card.carries`)
+        self.card: CardPoints | None = None
         self.desk_ambiguous_px = float(desk_ambiguous_px)
         self.branch_sigma_deg = float(branch_sigma_deg)
         self.reset()
@@ -153,6 +158,8 @@ class AnchorTracker:
         self._projections: dict = {}     # this frame's _project_world results
         if getattr(self, "desk", None) is not None:
             self.desk.reset()
+        if getattr(self, "card", None) is not None:
+            self.card.reset()
 
     def _other_branch_wins(self, obs: list[Observation], sol) -> bool:
         """Accumulate evidence between the two IPPE branches when a single planar anchor carries the pose.
@@ -294,6 +301,9 @@ class AnchorTracker:
         """Fill `res` from the frame's solution `sol` (and the desk's fit `desk`): the raw pose, the filter's
         update with the measurement's noise (radians) and weight, held to the corners."""
         raw = sol.world_from_camera if desk is None or not desk.decided else invert(desk.camera_from_world)
+        card = self._card_update(gray, obs, sol)
+        if card is not None:
+            raw = invert(card[0])
         depth = float(median((sol.world @ sol.camera_from_world[:3, :3].T + sol.camera_from_world[:3, 3])[:, 2]))
         # The measurement's noise in radians: pixel noise (the residual corrected for the 6 pose
         # parameters, at least 0.1 px) over the points' extent, times the lever f/extent that makes
@@ -318,6 +328,11 @@ class AnchorTracker:
         if desk is not None and desk.decided:
             # the desk's keypoints hold the tilt the corners cannot: the measurement is as good as its fit
             sigma, centre = max(desk.sigma, 1e-4), None
+        if card is not None:
+            # so do the card's points, each place the mean of many frames (card.py): the orbit mode is as
+            # well held as the rest, within the spread of a fit to the corners and those points
+            X = np.vstack([sol.world, card[1]])
+            sigma, centre = max(position_spread(self.camera.K, raw, X, px_sigma) / depth, 1e-4), None
         res.ambiguous = desk is not None and not desk.decided or (desk is None and self._desk_undecided())
         res.desk = desk is not None and desk.decided
         filt = self.filter.update(raw, t, depth, sigma, weight=weight, centre=centre)
@@ -338,6 +353,19 @@ class AnchorTracker:
         self.last_raw = raw
         self.tracked_keys = {(ob.anchor, g) for ob in obs if ob.anchor in sol.anchors
                              and self.models[ob.anchor].anchor_kind.detector == "aruco" for g in ob.groups.tolist()}
+
+    def _card_update(self, gray, obs: list[Observation], sol):
+        """The card's fit (`card.CardPoints.update`: camera_from_world, the card points used) when the card is
+        followed (`card` set) and a lone square marker carries the pose, and the card carries it
+        (`card.carries`); None otherwise (its points are forgotten when no lone marker is seen)."""
+        if self.card is None:
+            return None
+        if not (sol is not None and len(obs) == 1 and len(sol.world) == 4
+                and self.models[obs[0].anchor].anchor_kind.single_square):
+            self.card.reset()
+            return None
+        fit = self.card.update(gray, sol.world, sol.img, sol.camera_from_world)
+        return fit if self.card.carries else None
 
     def _desk_update(self, gray, t: float, obs: list[Observation], sol):
         """The desk's fit (`desk.DeskPlane.update`) when a lone square marker carries the pose and its two IPPE
