@@ -33,6 +33,7 @@ from tracking.poses import invert
 from tracking.slam.frame_pose import position_spread, refine_pose
 
 _LK = dict(winSize=(15, 15), maxLevel=2, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01))
+_CROP_PX = 40   # pixels of image kept around the points for the flow: its window and pyramid need ~30
 
 
 class CardPoints:
@@ -121,9 +122,22 @@ class CardPoints:
     def _follow(self, gray: np.ndarray, img: np.ndarray) -> None:
         """The points followed from the last frame into `gray` (forward-backward checked), those that left the
         marker's homography since their seeding by more than `follow_px` dropped (not on the card)."""
-        nxt, st, _ = cv2.calcOpticalFlowPyrLK(self._gray, gray, self.px, None, **_LK)
-        back, st2, _ = cv2.calcOpticalFlowPyrLK(gray, self._gray, nxt, None, **_LK)
-        ok = (st.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm(back - self.px, axis=1) < 0.5)
+        # on the images cropped around the points, where they were and where the marker's motion takes them
+        # (the pyramids of the whole image cost several times the flow itself; the motion only widens the crop:
+        # taken as the flow's start it follows points across the smear that the fit is better without)
+        guess = (self.px + np.median(img - self._corners, axis=0)).astype(np.float32)
+        both = np.vstack([self.px, guess])
+        h, w = gray.shape
+        x0, y0 = np.clip(np.floor(both.min(axis=0)).astype(int) - _CROP_PX, 0, [w, h])
+        x1, y1 = np.clip(np.ceil(both.max(axis=0)).astype(int) + _CROP_PX, 0, [w, h])
+        o = np.float32([x0, y0])
+        a, b = self._gray[y0:y1, x0:x1], gray[y0:y1, x0:x1]
+        nxt, st, _ = cv2.calcOpticalFlowPyrLK(a, b, self.px - o, None, **_LK)
+        ok = st.ravel() == 1
+        if self.carries:   # (the backward check only once the points carry: until then a slip is pruned later)
+            back, st2, _ = cv2.calcOpticalFlowPyrLK(b, a, nxt, None, **_LK)
+            ok &= (st2.ravel() == 1) & (np.linalg.norm(back + o - self.px, axis=1) < 0.5)
+        nxt = nxt + o
         self.px = nxt
         for s in np.unique(self.seed_of[ok]):
             m = ok & (self.seed_of == s)
