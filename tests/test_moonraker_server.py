@@ -18,7 +18,7 @@ import pytest
 import requests
 
 from arapp.printing.link import LinkError, PrinterHalted
-from arapp.printing.link.moonraker import MoonrakerError, MoonrakerLink, check_moonraker
+from arapp.printing.link.moonraker import FileInUse, MoonrakerError, MoonrakerLink, check_moonraker
 
 
 def commands(lines) -> int:
@@ -266,3 +266,34 @@ def test_profile_link_kind_errors_name_the_key(tmp_path, link, says):
                                                 "nozzle_diameter": 0.4, "filament_diameter": 1.75,
                                                 "start_gcode": "", "end_gcode": ""})
     assert says in str(info.value) and str(info.value).startswith("p.json: ")
+
+
+def test_an_upload_over_the_file_being_printed_is_retried_then_explained(moonraker_server, tmp_path):
+    """Moonraker refuses (HTTP 403, "File is loaded, upload not permitted") to replace the file of a job that
+    is printing or paused, also for a moment after the job ended, until Klipper's next report reaches it: the
+    link asks again for `in_use_wait_s`, then says what holds the file (not that the key was refused)."""
+    lines = job(3000, pause_at=400)
+    link = MoonrakerLink(moonraker_server.url)
+    link.connect()
+    tries = []
+
+    def upload_over_it():
+        other = MoonrakerLink(moonraker_server.url, in_use_wait_s=0.6)
+        other.connect()
+        t0 = time.monotonic()
+        with pytest.raises(FileInUse) as info:
+            other.upload(b"G28\n", name="in-use.gcode", start=False)
+        tries.append((time.monotonic() - t0, str(info.value)))
+        other.close()
+        link.resume()
+
+    seen, on_progress = until_paused(link, upload_over_it)
+    state = link.print_gcode(lines, progress=on_progress, gcode_path=str(tmp_path / "in-use.gcode"))
+    link.close()
+    assert state.status == "done"
+    (waited, text), = tries
+    assert 0.6 <= waited < 5.0
+    assert "in-use.gcode while Klipper prints it" in text and "HTTP 403" in text and "\n" not in text
+    assert "API key" not in text
+    # the stored file is the job's, not the upload refused over it
+    assert (moonraker_server.gcodes / "in-use.gcode").read_bytes() == ("\n".join(lines) + "\n").encode()

@@ -98,7 +98,11 @@ class TrackingPanel(QWidget):
     def update_stats(self, result, fps: float, latency_ms: float, dropped: int) -> None:
         """result: the pipeline's FrameResult of the frame just painted."""
         self.state.setText(result.state)
-        self.state.setStyleSheet(STATE_STYLE.get(result.state, ""))
+        style = STATE_STYLE.get(result.state, "")
+        if style != self.state.styleSheet():
+            # setting a style sheet re-polishes the label and lays the panel out again (milliseconds on the UI
+            # thread), even when it is the same one: only when the state changes
+            self.state.setStyleSheet(style)
         self.markers.setText(str(result.markers))
         self.inliers.setText(str(result.inliers))
         self.fps.setText(f"{fps:.1f} fps")

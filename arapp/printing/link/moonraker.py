@@ -64,6 +64,15 @@ class MoonrakerError(LinkError):
     """Moonraker (or Klipper behind it) refused a request; the message is one line for the user."""
 
 
+class FileInUse(MoonrakerError):
+    """Moonraker will not replace (or delete) the file Klipper is printing or has paused (its HTTP 403)."""
+
+
+# Moonraker's words when it refuses to touch the file a job has loaded (file_manager: HTTP 403)
+IN_USE_MESSAGES = ("file currently in use", "file is loaded")
+IN_USE_RETRY_S = 0.25   # Klipper reports its state every 250 ms
+
+
 def first_line(text) -> str:
     """The first non-empty line of a Klipper message (its shutdown messages run to many lines)."""
     for line in str(text or "").splitlines():
@@ -182,12 +191,15 @@ class JobWatch:
 class MoonrakerLink(PrintLink):
     """A Klipper printer behind Moonraker (url like http://mainsailos.local or http://host:7125).
 
-    api_key: Moonraker's API key, or None on a trusted LAN (Moonraker's `trusted_clients`).
+    api_key: Moonraker's API key, or None on a trusted LAN (Moonraker's `trusted_clients`). in_use_wait_s:
+    seconds an upload is asked again while Moonraker still counts a job of the same file name as printing
+    (right after that job ended, until Klipper's next report reaches it).
     """
 
     def __init__(self, url: str, api_key: str | None = None, *, timeout: float = 30.0, job_path=None,
-                 name: str = "arapp.gcode", poll_interval: float = 0.25):
+                 name: str = "arapp.gcode", poll_interval: float = 0.25, in_use_wait_s: float = 5.0):
         self.url = check_base_url(url, "Moonraker", "http://mainsailos.local")
+        self.in_use_wait_s = float(in_use_wait_s)
         self._key = api_key or None
         self.timeout = float(timeout)
         self.poll_interval = min(0.25, float(poll_interval))  # cancel is looked at 4 times a second
@@ -215,7 +227,11 @@ class MoonrakerLink(PrintLink):
             r = self._session.request(method, self.url + path, timeout=self.timeout, **kw)
         except requests.RequestException as exc:
             raise LinkLost(f"Moonraker at {self.url} cannot be reached: {type(exc).__name__}") from None
-        if r.status_code in (401, 403):
+        if r.status_code == 403 and any(m in r.text.lower() for m in IN_USE_MESSAGES):
+            # (Moonraker 0.11 answers "Forbidden" and names the reason only in its traceback)
+            raise FileInUse(f"Moonraker at {self.url} refused {method} {path.split('?')[0]} (HTTP 403): Klipper is "
+                            "printing that file; wait for its job to end, or cancel it")
+        if r.status_code == 401:   # (Moonraker's 403s are about files and folders, never the key)
             if self._key:
                 raise MoonrakerError(f"Moonraker at {self.url} refused the API key (HTTP {r.status_code}); "
                                      f"check the key file ({KEY_HINT})")
@@ -318,7 +334,9 @@ class MoonrakerLink(PrintLink):
         files = {"file": (name, data, "application/octet-stream")}
         form = {"root": "gcodes", "print": "true" if start else "false"}
         try:
-            return self._request("POST", "/server/files/upload", files=files, data=form) or {}
+            return self._upload_when_free(name, files, form)
+        except FileInUse:
+            raise
         except MoonrakerError as exc:
             if "HTTP 400: no reason given" not in str(exc):
                 raise
@@ -330,6 +348,22 @@ class MoonrakerLink(PrintLink):
         raise MoonrakerError(f"Moonraker at {self.url} refused the upload of {name} ({len(data) / 1048576:.1f} MB) "
                              f"without a reason ({how}): it refuses a file over its max_upload_size that way "
                              "(moonraker.conf [server])") from None
+
+    def _upload_when_free(self, name: str, files: dict, form: dict) -> dict:
+        """POST the upload; while Moonraker still counts a job of the same file name as printing (it learns
+        that a job ended from Klipper's next report, which can come after ours), ask again for up to
+        `in_use_wait_s`, then say why it was refused (FileInUse)."""
+        deadline = time.monotonic() + self.in_use_wait_s
+        while True:
+            try:
+                return self._request("POST", "/server/files/upload", files=files, data=form) or {}
+            except FileInUse as exc:
+                if time.monotonic() >= deadline:
+                    raise FileInUse(f"Moonraker at {self.url} will not replace {name} while Klipper prints it "
+                                    f"(HTTP 403, still after {self.in_use_wait_s:g} s): wait for that job to end, "
+                                    "cancel it, or print under another file name") from exc
+                if self._cancel_req.wait(IN_USE_RETRY_S):
+                    raise   # cancelled meanwhile: no more tries
 
     def _take(self, notes: list[dict]) -> None:
         """Apply Moonraker's notifications to `status`; remember a Klipper shutdown or disconnect."""
