@@ -65,6 +65,7 @@ from tracking.fusion.image import has_content, prepare
 from tracking.fusion.keyframes import Keyframes
 from tracking.fusion.moving import MovingAnchors
 from tracking.fusion.output import Output
+from tracking.fusion.smear_gate import SmearGate
 from tracking.fusion.state import AnchorMemory, FrameState, TrackResult, TrackStatus
 from tracking.anchors.kinds import AnchorSpec
 from tracking.slam.features import FeatureExtractor, Features
@@ -110,6 +111,7 @@ class Tracker:
         self.motion = MotionModel()
         self.handover = Handover(cfg, camera, self.anchor_tracker, self.motion)
         self.fits = PoseFits(cfg, camera, self.map, self.motion, self.handover)
+        self._outlines = np.concatenate(self.anchor_tracker.outlines)   # every anchor's outline, world (N,3)
         self._fresh_state()
 
     # -- lifecycle ------------------------------------------------------------------
@@ -123,6 +125,7 @@ class Tracker:
         self.output = Output(cfg, self.camera, self.motion)
         self.keyframes = Keyframes(cfg, self.map, self.mapper)
         self.room = MovingAnchors(self.camera, self.handover, self.fits.track_map, cfg.min_inliers)
+        self.smear_gate = SmearGate(self.camera, cfg.smear_px, cfg.smear_skip)
 
     def reset(self) -> None:
         """Forget the map and the motion; the next frame starts from the anchors."""
@@ -264,10 +267,14 @@ class Tracker:
         frames, to get back onto the map. (result or None, the anchors' result, whether detection is
         still to run)."""
         st, t = self.status, self.frame.t
-        fut = self._submit_detection() if detect else None
+        # (a pan that smeared the anchors past reading on the last pass reads them no better while it does
+        # not slow down: `SmearGate`; detection then still runs if the flow fails)
+        motion = self.smear_gate.measure(self._outlines, self.motion.last, self.motion.predict(t)) if detect else None
+        fut = self._submit_detection() if detect and not self.smear_gate.skip(motion) else None
         got = self._follow_from_last()
         if fut is not None:
             ar = fut.result()
+            self.smear_gate.passed(int(ar.markers) > 0, motion)
             self._note_anchors(ar)
             st.since_detect = 0
             detect = False
@@ -470,6 +477,8 @@ class Tracker:
     def _note_anchors(self, ar) -> None:
         """Remember the corners the anchors measured (for `_fast_predicted` on the next frame), and their result
         on this frame (for `_finish`)."""
+        if ar is not None and int(ar.markers) > 0:
+            self.smear_gate.reset()
         if ar is not None and ar.raw_world_from_camera is not None and len(ar.object_points) >= 4:
             self.anchor.corners = np.asarray(ar.object_points, float).reshape(-1, 3)
             self.frame.anchors = ar
@@ -531,6 +540,7 @@ class Tracker:
         """A frame without a pose."""
         self.status.lost += 1
         self.anchor.spread = None
+        self.smear_gate.reset()
         self.flow.lose()
         self.motion.lose()
         self.output.lose()
