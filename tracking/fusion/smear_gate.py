@@ -4,8 +4,8 @@ A pan smears the markers past reading while they stay in view; the detector then
 frame, at the cost of a whole-frame pass (as much as the plain OpenCV peer spends on the frame). The rule
 here needs no threshold on the smear itself (which depends on the exposure, the markers' cell size and the
 direction of motion): once a detection pass has read none of the anchors while the motion model put them in
-view, moving `smear_px` or more in the image since the frame before, the frames after it whose predicted
-motion of the anchors is at least as large (the smear no smaller) and whose view holds no more of them are
+view, moving `smear_px` or more in the image since the frame before, the frames after it whose motion of the
+anchors (predicted, and no more than over the last step) is at least as large (the smear no smaller) and whose view holds no more of them are
 read no better, and skip it. A pass still runs on every `max_skip + 1`-th frame whatever the prediction
 says (a marker moved in the room, or the exposure changed), and on every frame as the pan slows down.
 
@@ -53,32 +53,41 @@ class SmearGate:
         self.unread_share = 0.0
         self.skipped = 0
 
-    def measure(self, outlines: np.ndarray, last: np.ndarray, predicted: np.ndarray) -> tuple[float, float]:
-        """(the most any point of the anchors' outlines (N,3 world) moves in the image from the pose `last` to
-        `predicted` (world_from_camera), pixels; the share of their box in view at `predicted`); (0, 0) when
-        some point lies behind the camera at either pose."""
+    def measure(self, outlines: np.ndarray, last: np.ndarray, predicted: np.ndarray,
+                step: tuple[np.ndarray, float] | None = None, dt: float = 0.0) -> tuple[float, float]:
+        """(how far the anchors move in the image this frame: the most any point of their outlines (N,3 world)
+        moves from the pose `last` to `predicted` (world_from_camera), pixels, or, when less, as far as it did
+        over the last step (`step` = (the pose before `last`, the seconds to it), scaled to this frame's `dt`
+        seconds): a constant-velocity prediction lags behind a pan slowing down, and the markers may be read
+        again a frame before it says so; the share of their box in view at `predicted`). (0, 0) when some
+        point lies behind the camera."""
         a, za = project(self.camera, invert(last), outlines)
         b, zb = project(self.camera, invert(predicted), outlines)
         if np.any(za <= 0.01) or np.any(zb <= 0.01):
             return 0.0, 0.0
-        return float(np.linalg.norm(b - a, axis=1).max()), view_share(self.camera, b)
+        px = float(np.linalg.norm(b - a, axis=1).max())
+        if step is not None and step[1] > 0 and dt > 0:
+            c, zc = project(self.camera, invert(step[0]), outlines)
+            if np.all(zc > 0.01):
+                px = min(px, float(np.linalg.norm(a - c, axis=1).max()) * dt / step[1])
+        return px, view_share(self.camera, b)
 
-    def skip(self, motion: tuple[float, float]) -> bool:
-        """Whether this frame, whose anchors move `motion` = (pixels, view share) (`measure`), skips its
-        detection pass (counted)."""
+    def skip(self, motion: tuple[float, float] | None) -> bool:
+        """Whether this frame, whose anchors move `motion` = (pixels, view share) (`measure`; None: unknown),
+        skips its detection pass (counted)."""
+        if motion is None or self.unread_px is None or self.skipped >= self.max_skip:
+            return False
         px, share = motion
-        if (self.unread_px is None or self.skipped >= self.max_skip or px < self.unread_px
-                or share > self.unread_share + MORE_IN_VIEW):
+        if px < self.unread_px or share > self.unread_share + MORE_IN_VIEW:
             return False
         self.skipped += 1
         return True
 
-    def passed(self, read: bool, motion: tuple[float, float]) -> None:
-        """A detection pass ran on a frame whose anchors moved `motion` (`measure`): `read` whether it read
-        any of them."""
-        px, share = motion
+    def passed(self, read: bool, motion: tuple[float, float] | None) -> None:
+        """The anchors were measured this frame: `read` whether any of them were; `motion` how they move
+        (`measure`; None: unknown)."""
         self.skipped = 0
-        if read or px < self.smear_px or share < IN_VIEW:
+        if read or motion is None or motion[0] < self.smear_px or motion[1] < IN_VIEW:
             self.unread_px = None
         else:
-            self.unread_px, self.unread_share = px, share
+            self.unread_px, self.unread_share = motion

@@ -269,12 +269,10 @@ class Tracker:
         st, t = self.status, self.frame.t
         # (a pan that smeared the anchors past reading on the last pass reads them no better while it does
         # not slow down: `SmearGate`; detection then still runs if the flow fails)
-        motion = self.smear_gate.measure(self._outlines, self.motion.last, self.motion.predict(t)) if detect else None
-        fut = self._submit_detection() if detect and not self.smear_gate.skip(motion) else None
+        fut = self._submit_detection() if detect and not self.smear_gate.skip(self._anchor_motion()) else None
         got = self._follow_from_last()
         if fut is not None:
             ar = fut.result()
-            self.smear_gate.passed(int(ar.markers) > 0, motion)
             self._note_anchors(ar)
             st.since_detect = 0
             detect = False
@@ -477,11 +475,20 @@ class Tracker:
     def _note_anchors(self, ar) -> None:
         """Remember the corners the anchors measured (for `_fast_predicted` on the next frame), and their result
         on this frame (for `_finish`)."""
-        if ar is not None and int(ar.markers) > 0:
-            self.smear_gate.reset()
+        if ar is not None:
+            read = int(ar.markers) > 0
+            self.smear_gate.passed(read, None if read else self._anchor_motion())
         if ar is not None and ar.raw_world_from_camera is not None and len(ar.object_points) >= 4:
             self.anchor.corners = np.asarray(ar.object_points, float).reshape(-1, 3)
             self.frame.anchors = ar
+
+    def _anchor_motion(self) -> tuple[float, float] | None:
+        """`SmearGate.measure` of every anchor this frame (once a frame), None without a velocity."""
+        frame, motion = self.frame, self.motion
+        if frame.anchor_motion is None and motion.last is not None and motion.velocity is not None:
+            frame.anchor_motion = self.smear_gate.measure(self._outlines, motion.last, motion.predict(frame.t),
+                                                          motion.last_step(), frame.t - motion.last_t)
+        return frame.anchor_motion
 
     def _fast_predicted(self) -> bool:
         """Whether the motion model alone moves the corners the anchors last measured `smear_px` or more in
