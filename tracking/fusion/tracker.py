@@ -20,7 +20,9 @@ prediction; the pose is a robust joint fit of marker corners and map points
 (anchors dominate), or of map points alone, or comes from relocalisation. When
 all of that fails on a frame that follows a tracked one (motion blur smears
 markers and descriptors alike), keypoints are followed from the last frame by
-optical flow (`tracking.slam.flow`) and carry the pose. Under fast motion the flow
+optical flow (`tracking.slam.flow`) and carry the pose (while a pan keeps the markers smeared past
+reading, the flow frames after a detection pass that read none of them skip theirs: `SmearGate`,
+`smear_skip`). Under fast motion the flow
 also checks the anchors for smear; when the motion model predicts it, it runs on
 this thread while the anchors are measured on the worker (OpenCV releases the
 interpreter; the results are those of running one after the other), and its
