@@ -75,11 +75,13 @@ demo: $(STAMP)
 test: $(STAMP) $(SERVER_STAMPS) recordings
 	$(VENV)/bin/lint-imports --no-cache && $(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder tests
 
-# Every synthetic preset's recording the tests and benchmarks read: the bundled ones in recordings/, the rest
-# rendered once into the recordings cache (.cache/recordings/, see recordings/README.md; a few seconds when they
-# are there). Part of the set-up; tests and benchmarks would render a missing one on first use.
+# Every synthetic preset's recording the tests and benchmarks read (the bundled ones in recordings/, the rest
+# rendered once into the recordings cache, .cache/recordings/, see recordings/README.md) and the tests' own scenes
+# (tests/scene_book.py); a few seconds when they are there. Part of the set-up; tests and benchmarks would
+# render a missing one on first use.
 recordings: $(STAMP)
 	$(ARAPP) synth all --cached --jobs $(or $(filter-out 0,$(TEST_WORKERS)),1) >/dev/null
+	$(PY) tests/scene_book.py --jobs $(or $(filter-out 0,$(TEST_WORKERS)),1)
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py --out BENCHMARKS.md $(if $(ONLY),--only $(ONLY) --merge)

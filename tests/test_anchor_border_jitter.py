@@ -14,9 +14,9 @@ import pytest
 from tracking.anchors import AnchorTracker
 from tracking.anchors.model import build_models
 from tracking.poses import invert
-from scenes import SKIN_BGR, marker_side, render_sequence, scene_dict
+from scene_book import book_frames
+from scenes import SKIN_BGR, marker_side
 
-MARKER = 0.058   # m, DICT_4X4_50 id 3 (scene_dict's marker)
 COVER_FROM = 24  # frame from which the fingers rest on the border
 
 
@@ -59,14 +59,7 @@ def paint_resting_hand(img, quad, side=1):
 def resting_hand():
     """3 s at ~0.44 m from a lone 5.8 cm marker, the camera orbiting slowly with a hand's shake; from
     frame COVER_FROM on a hand rests its fingertips on the border on the marker's right."""
-    keys = [{"t": 0.0, "eye": [-0.07, -0.21, 0.38], "target": [0.0, 0.0, 0.0]},
-            {"t": 1.0, "eye": [-0.035, -0.215, 0.383], "target": [0.002, 0.001, 0.0]},
-            {"t": 2.0, "eye": [0.0, -0.212, 0.386], "target": [0.003, -0.001, 0.0]},
-            {"t": 3.0, "eye": [0.035, -0.205, 0.384], "target": [0.006, 0.0, 0.0]}]
-    sj = scene_dict("resting_hand", keys, marker_length=MARKER, seed=23, noise=2.0, supersample=2)
-    sj["trajectory"]["shake"] = {"pos_mm": 1.5, "rot_deg": 0.25, "freq_hz": 1.6}
-    sj["effects"]["defocus"] = 0.6
-    frames, scene = render_sequence(sj)
+    frames, scene = book_frames("resting_hand")   # tests/scene_book.py
     out = []
     for i, (t, img, gt) in enumerate(frames):
         if i >= COVER_FROM:

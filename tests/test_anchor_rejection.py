@@ -13,11 +13,9 @@ from tracking.anchors import AnchorTracker
 from tracking.anchors.model import build_models
 from tracking.anchors.occlusion import covered_fraction, is_covered
 from tracking.recording.schema import parse_anchors
-from scenes import SKIN_BGR, marker_side, render_sequence, scene_dict
+from scene_book import book_frames, desk_point, scene_json
+from scenes import SKIN_BGR, marker_side
 from tracking.fusion import Tracker
-
-MARKER = 0.06   # m, DICT_4X4_50 id 3 (scene_dict's marker)
-
 
 def paint_fingers(img, quad, side, reach_cells, shade=0.85, shift=0.0):
     """Three rounded fingers coming from outside side `side` (corners side, side+1) of the marker `quad`
@@ -50,10 +48,7 @@ def marker_quad(scene, pose):
 def hand_sequence():
     """2.5 s at 0.45 m from a lone 6 cm marker; from 1.5 s three fingers slide in from above, from a
     cell outside the margin to half a cell over the black border, then stay."""
-    keys = [{"t": 0.0, "eye": [-0.06, -0.20, 0.40], "target": [0, 0, 0]},
-            {"t": 2.5, "eye": [0.04, -0.18, 0.41], "target": [0.01, 0, 0]}]
-    frames, scene = render_sequence(scene_dict("hand", keys, marker_length=MARKER, seed=11, noise=1.5,
-                                               supersample=3))
+    frames, scene = book_frames("finger_flick")   # tests/scene_book.py
     out, reach = [], []
     for i, (t, img, gt) in enumerate(frames):
         r = None
@@ -155,7 +150,6 @@ def test_a_finger_over_a_corner_is_refitted_from_the_uncovered_edges(hand_sequen
 
 
 # ----------------------------------------------------------------------------------------------------
-LOOKALIKE_AT = [0.16, 0.02]   # where the look-alike id 17 really lies on the desk (m)
 DECLARED_AT = [0.24, 0.06]    # where the session says anchor id 17 is
 
 
@@ -165,15 +159,9 @@ def lookalike_sequence():
     view beside it (from the first frame: nothing holds the pose yet), then on until only the look-alike is
     in view; the session declares id 17 8.9 cm
     from where the look-alike lies."""
-    keys = [{"t": 0.0, "eye": [-0.16, -0.25, 0.40], "target": [-0.12, 0, 0]},
-            {"t": 1.5, "eye": [-0.06, -0.25, 0.40], "target": [-0.04, 0, 0]},
-            {"t": 2.5, "eye": [0.08, -0.25, 0.40], "target": [0.10, 0.0, 0]},
-            {"t": 3.5, "eye": [0.20, -0.22, 0.40], "target": [0.32, 0.02, 0]}]
-    sj = scene_dict("lookalike", keys, marker_length=MARKER, seed=7, noise=1.5, supersample=2)
-    sj["anchors"].append({"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 17, "length": MARKER,
-                          "world_from_anchor": _at(LOOKALIKE_AT)})
-    frames, scene = render_sequence(sj)
-    declared = parse_anchors(sj["anchors"][:1] + [dict(sj["anchors"][1], world_from_anchor=_at(DECLARED_AT))])
+    sj = scene_json("lookalike")   # tests/scene_book.py (the look-alike lies at its LOOKALIKE_AT)
+    frames, scene = book_frames("lookalike")
+    declared = parse_anchors(sj["anchors"][:1] + [dict(sj["anchors"][1], world_from_anchor=desk_point(DECLARED_AT))])
     return frames, scene, declared
 
 
@@ -185,12 +173,6 @@ def _seen(frames, marker_id):
         _, ids, _ = det.detectMarkers(img)
         n += ids is not None and marker_id in ids.ravel()
     return n
-
-
-def _at(xy):
-    T = np.eye(4)
-    T[:2, 3] = xy
-    return T.tolist()
 
 
 def test_a_lookalike_anchor_does_not_teleport_the_model(lookalike_sequence):

@@ -11,7 +11,7 @@ import pytest
 from tracking.anchors import AnchorTracker
 from tracking.anchors.blur import fit_pose_and_stretch, marker_offsets, spread_enough
 from tracking.camera import Camera
-from scenes import board_scene_dict, render_sequence
+from scene_book import book_frames
 
 CAM = Camera(K=np.array([[560.0, 0, 322.0], [0, 560.0, 236.0], [0, 0, 1]]), dist=np.array([-0.08, 0.04, 0, 0, 0]),
              width=640, height=480)
@@ -81,11 +81,7 @@ def test_a_row_of_markers_is_not_spread_enough():
 def panning_board():
     """A 5x3 GridBoard at ~0.5 m, the camera panning across it and back in a second (up to ~40 deg/s),
     motion blur over 60 % of each frame."""
-    keys = [{"t": 0.0, "eye": [-0.02, -0.26, 0.42], "target": [0.02, 0.05, 0.0]},
-            {"t": 0.5, "eye": [0.06, -0.25, 0.42], "target": [0.12, 0.06, 0.0]},
-            {"t": 1.0, "eye": [0.0, -0.26, 0.42], "target": [0.02, 0.05, 0.0]}]
-    sj = board_scene_dict("pan_blur", keys, seed=21, motion_blur=0.6, blur_samples=7)
-    return render_sequence(sj)
+    return book_frames("pan_blur")   # tests/scene_book.py
 
 
 def _errors(frames, scene, unblur):

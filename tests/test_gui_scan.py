@@ -21,11 +21,11 @@ N_FRAMES = 40
 
 
 @pytest.fixture(scope="module")
-def vase_recording(tmp_path_factory):
+def vase_recording():
     from scan_scene import vase_truth
     from test_scan_session import shared_vase_recording
 
-    return shared_vase_recording(tmp_path_factory), vase_truth()
+    return shared_vase_recording(), vase_truth()
 
 
 def test_scan_fills_the_dome_and_the_mesh_becomes_the_model(qtbot, tmp_path, vase_recording):

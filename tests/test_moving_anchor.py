@@ -133,11 +133,14 @@ def test_held_marker_card_is_no_worse_than_plain(name):
     plain peer's own median), so the goal here is the peer's: as many frames placed, and the worst frame
     no further off than the peer's worst; the few points on a lone marker do not carry it across a swing.
     The card is seen to move by the still background (pixels, no pose) while it drifts, before its first
-    swing, so the still room never carries it (measured on test_held_marker: moving from frame 30, 106
-    frames placed against plain's 105, worst 6.0 cm against 6.4 cm, 6 frames over 3 cm as plain's 6 (15
-    before the anchor tracker's IPPE choice let the better-fitting branch win: AnchorTracker
-    branch_sigma_deg); the rules were chosen on tune_held_marker, where it places 110 against 110 and is
-    3.9 cm off at worst against plain's 7.8, 3 frames over 3 cm against plain's 12)."""
+    swing, so the still room never carries it; from then on the card the marker is printed on judges its
+    tilt (tracking.anchors.card: its points, each placed where many frames' marker poses put it), and no
+    frame is placed more than 3 cm off (measured on test_held_marker: moving from frame 30, 105 frames placed
+    against plain's 105, worst 3.2 cm against 6.4 cm, 5 frames over 3 cm against plain's 6, all five before
+    the card was seen to move, still before the camera; after that the worst 2.1 cm (6.1 cm with the marker's
+    own corners and filter alone); the rules were chosen on tune_held_marker, where it places 110 against 110,
+    is 3.0 cm off at worst against plain's 7.8 and no frame over 3 cm against plain's 12 (3.9 cm and 3 frames
+    with the corners alone), 2.5 cm at worst once the card moves)."""
     r = _run(name)
     e, plain = r["errors"], r["plain"]
     assert r["moving"], "the card moved in the room but the tracker did not notice"
@@ -146,11 +149,15 @@ def test_held_marker_card_is_no_worse_than_plain(name):
     assert r["moving_from"] < int(np.flatnonzero(~np.isfinite(plain))[0]), r["moving_from"]
     assert int(np.isfinite(e).sum()) >= int(np.isfinite(plain).sum()), (int(np.isfinite(e).sum()),
                                                                          int(np.isfinite(plain).sum()))
-    assert float(np.nanmax(e)) <= float(np.nanmax(plain)), (float(np.nanmax(e)), float(np.nanmax(plain)))
-    # the issue's 3 cm: not more frames beyond it than plain OpenCV's, within two (measured 6 and 6; keeping
-    # the IPPE branch the prediction holds over the one the corners fit better gave 15)
+    assert float(np.nanmax(e)) <= 0.6 * float(np.nanmax(plain)), (float(np.nanmax(e)), float(np.nanmax(plain)))
+    # once the card is seen to move its points judge the tilt: none more than 3 cm off (measured 2.1 cm; the
+    # marker's corners and filter alone placed a frame 6.1 cm off there)
+    after = e[r["moving_from"] + 1:]
+    assert float(np.nanmax(after)) <= 0.025, (float(np.nanmax(after)), int(np.nanargmax(after)) + r["moving_from"] + 1)
+    # the issue's 3 cm: not more frames beyond it than plain OpenCV's (measured 5 against 6, all before the
+    # card moved: a still head-on marker's tilt)
     over, plain_over = int(np.sum(e > MAX_ERR_M)), int(np.sum(plain > MAX_ERR_M))
-    assert over <= plain_over + 2, (over, plain_over)
+    assert over <= plain_over, (over, plain_over)
     # never placed from the still room: every placed frame is the marker's or the flow on it
     assert all(s in ("marker", "slam") for s, p in zip(r["states"], r["poses"]) if p is not None)
 

@@ -11,7 +11,6 @@ and `arapp model info` as the consumers.
 from __future__ import annotations
 
 import json
-import os
 import threading
 
 import numpy as np
@@ -28,12 +27,13 @@ pytestmark = pytest.mark.slow
 @pytest.fixture(scope="module")
 def vase_scan(tmp_path_factory):
     """The synthetic recording, and `arapp scan ... --print --nurbs` run on it once."""
-    from scan_scene import write_vase_recording
+    from scan_scene import vase_truth
+    from scene_book import vase_recording
 
     root = tmp_path_factory.mktemp("scan")
-    rec = root / "scan_vase"
-    # not the scene the parameters were tuned on (seed 7, 48 frames, used by benchmarks/bench_scan.py)
-    truth = write_vase_recording(rec, n_frames=44, seed=11)
+    # not the scene the parameters were tuned on (seed 7, 48 frames, used by benchmarks/bench_scan.py);
+    # rendered once into the recordings cache (tests/scene_book.py), read only here
+    rec, truth = vase_recording(n_frames=44, seed=11), vase_truth()
     out = root / "vase.stl"
     nurbs = root / "vase.json"
     rc = main(["scan", str(rec), "-o", str(out), "--print", "--nurbs", str(nurbs)])

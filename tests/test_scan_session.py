@@ -134,23 +134,23 @@ def test_registered_placement_leaves_the_mesh_where_it_is():
         assert M == pytest.approx(np.eye(4), abs=1e-9)
 
 
-def shared_vase_recording(tmp_path_factory):
-    """The synthetic scan recording both scan-mode test modules use, rendered once per test run (shared by
-    the xdist workers): a 40-frame orbit, seed 5 (not the benchmark's scene: seed 7, 48 frames)."""
-    from cache_helpers import once_per_run
-    from scan_scene import write_vase_recording
+def shared_vase_recording():
+    """The synthetic scan recording both scan-mode test modules use, rendered once into the recordings cache
+    (tests/scene_book.py, shared by the xdist workers and later runs): a 40-frame orbit, seed 5 (not the
+    benchmark's scene: seed 7, 48 frames)."""
+    from scene_book import vase_recording
 
-    return once_per_run(tmp_path_factory, "scan_vase_40_seed5", lambda d: write_vase_recording(d, n_frames=40, seed=5))
+    return vase_recording(n_frames=40, seed=5)
 
 
 @pytest.fixture(scope="module")
-def vase_frames(tmp_path_factory):
+def vase_frames():
     pytest.importorskip("skimage", reason="arapp[scan] extra not installed")
     from scan_scene import orbit_poses, vase_truth
     from tracking.sources import open_source
 
     truth = vase_truth()
-    src = open_source(str(shared_vase_recording(tmp_path_factory)))
+    src = open_source(str(shared_vase_recording()))
     images = [f.image for f in src]
     src.close()
     return truth, orbit_poses(truth, 40, 0.30), images   # the poses the recording was rendered from

@@ -315,15 +315,9 @@ def test_a_board_coming_back_in_part_does_not_take_over_from_the_flow():
     `Handover.flow_holds_better`). Oracles: OpenCV's own
     detector for how many markers are in view, the render's ground truth for the error (0.6 mm measured on
     the two-marker frame)."""
-    from scenes import board_scene_dict, render_sequence
+    from scene_book import book_frames
 
-    centre = [0.09, 0.05, 0.0]
-    keys = [{"t": 0.0, "eye": [0.09, -0.22, 0.40], "target": centre},
-            {"t": 0.3, "eye": [0.09, -0.22, 0.40], "target": centre},
-            {"t": 0.7, "eye": [0.20, -0.22, 0.40], "target": [0.55, 0.05, 0.0]},
-            {"t": 1.0, "eye": [0.18, -0.22, 0.40], "target": [0.36, 0.05, 0.0]},
-            {"t": 1.3, "eye": [0.09, -0.22, 0.40], "target": centre}]
-    frames, scene = render_sequence(board_scene_dict("partial_return", keys, seed=41))
+    frames, scene = book_frames("partial_return")   # tests/scene_book.py
     det = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
     seen = [0 if (ids := det.detectMarkers(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY))[1]) is None else len(ids)
             for _, img, _ in frames]

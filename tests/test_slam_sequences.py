@@ -8,7 +8,8 @@ import pytest
 
 from tracking.anchors import plain_opencv_pose
 from tracking.evaluation import evaluate
-from scenes import away_and_back_keys, bundled_recording as recording, render_sequence, run_tracker, scene_dict
+from scene_book import book_frames
+from scenes import bundled_recording as recording, run_tracker
 from tracking.fusion import Tracker, TrackResult
 
 
@@ -65,11 +66,7 @@ def test_fast_blurred_pan_is_tracked_between_the_sharp_turns():
 def test_repeated_texture_gives_no_wrong_pose():
     """A floor of identical tiles: every keypoint has look-alikes a tile away. Away from the marker the
     pose may be lost, but never wrong, and the marker takes over again on return."""
-    scene = scene_dict("tiles", away_and_back_keys(away_s=3.0), fps=15.0, desk_style="tiles")
-    frames, _ = render_sequence(scene)
-    from tracking.synth.scene import parse_scene
-
-    parsed = parse_scene(scene)
+    frames, parsed = book_frames("tiles")   # tests/scene_book.py
     with Tracker(parsed.camera, parsed.anchors) as tr:
         r = run_tracker(tr, frames)
     states, err = np.array(r["states"]), r["errors"]
@@ -128,9 +125,8 @@ def test_tracking_never_waits_for_mapping(monkeypatch):
 
 
 def test_return_after_five_seconds_away_does_not_jump():
-    frames, _ = render_sequence(scene_dict("away", away_and_back_keys(away_s=5.0), fps=15.0))
-    scene_camera, anchors = _scene_parts()
-    with Tracker(scene_camera, anchors) as tr:
+    frames, scene = book_frames("away")   # tests/scene_book.py
+    with Tracker(scene.camera, scene.anchors) as tr:
         r = run_tracker(tr, frames)
     states, err = r["states"], r["errors"]
     assert r["metrics"].tracked_fraction >= 0.97
@@ -148,13 +144,6 @@ def test_return_after_five_seconds_away_does_not_jump():
         step = (p1[:3, 3] - p0[:3, 3]) - (frames[i][2][:3, 3] - frames[i - 1][2][:3, 3])
         assert np.linalg.norm(step) <= 0.02
     assert np.nanmax(err) <= 0.02
-
-
-def _scene_parts():
-    from tracking.synth.scene import parse_scene
-
-    s = parse_scene(scene_dict("away", away_and_back_keys(away_s=5.0), fps=15.0))
-    return s.camera, s.anchors
 
 
 def test_bad_frames_neither_crash_nor_teleport():

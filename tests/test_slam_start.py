@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from scenes import board_scene_dict, render_sequence
+from scene_book import book_frames
 from tracking.fusion import Tracker
 
 SMEARED = 4   # frames
@@ -16,10 +16,7 @@ SMEARED = 4   # frames
 
 @pytest.fixture(scope="module")
 def board_frames():
-    keys = [{"t": 0.0, "eye": [0.06, -0.24, 0.42], "target": [0.10, 0.06, 0.0]},
-            {"t": 0.5, "eye": [0.065, -0.24, 0.42], "target": [0.10, 0.06, 0.0]}]
-    sj = board_scene_dict("still_board", keys, seed=33)
-    frames, scene = render_sequence(sj)
+    frames, scene = book_frames("still_board")   # tests/scene_book.py
     kernel = np.ones((1, 6), np.float32) / 6
     out = [(t, cv2.filter2D(img, -1, kernel) if i < SMEARED else img, gt) for i, (t, img, gt) in enumerate(frames)]
     return out, scene

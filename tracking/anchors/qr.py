@@ -134,6 +134,18 @@ class QRTracking:
         return np.percentile(vl, 10) - np.percentile(vd, 90) > 10 and vl.mean() - vd.mean() > 30
 
     # -- per frame ------------------------------------------------------------------------------------
+    def expected(self, cfw: np.ndarray | None) -> set[int] | None:
+        """QR anchors the predicted pose puts (partly) inside the image; None when there is no prediction."""
+        if cfw is None:
+            return None
+        out = set()
+        for m in self.models:
+            px, z = project(self.camera, cfw, m.to_world(square_corners(m.spec.length)))
+            if np.all(z > 0) and np.any((px[:, 0] >= 0) & (px[:, 0] < self.camera.width)
+                                        & (px[:, 1] >= 0) & (px[:, 1] < self.camera.height)):
+                out.add(m.index)
+        return out
+
     def process(self, gray: np.ndarray, predicted_camera_from_world: np.ndarray | None,
                 expected: set[int] | None = None) -> list[Observation]:
         """QR observations in this frame. `predicted_camera_from_world` (or None) places codes not yet tracked;

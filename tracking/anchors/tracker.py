@@ -9,6 +9,7 @@ import time
 import numpy as np
 
 from tracking.anchors.blur import MIN_MARKERS, fit_pose_and_stretch, marker_groups, marker_offsets, spread_enough
+from tracking.anchors.card import CardPoints
 from tracking.anchors.desk import DeskPlane
 from tracking.anchors.deskew import deskew_observation
 from tracking.anchors.diagnose import diagnose as diagnose_image
@@ -16,7 +17,7 @@ from tracking.anchors.detect import ArucoDetection, Observation
 from tracking.anchors.edges import edge_sharpness
 from tracking.anchors.filter import PoseFilter
 from tracking.anchors.hold import hold_to_corners
-from tracking.anchors.model import AnchorModel, build_models, square_corners
+from tracking.anchors.model import AnchorModel, build_models
 from tracking.anchors.occlusion import covered_fraction, is_covered, refit_covered
 from tracking.anchors.plain import plain_opencv_pose, to_gray  # noqa: F401  (plain_opencv_pose: re-exported)
 from tracking.anchors.numeric import median, row_norms
@@ -128,6 +129,7 @@ class AnchorTracker:
         self.branch_decay = float(branch_decay)
         self.branch_switch = float(branch_switch)
         self.desk = DeskPlane(camera) if desk else None
+        self.card: CardPoints | None = None   # a lone marker's card, set by the caller (card.py)
         self.desk_ambiguous_px = float(desk_ambiguous_px)
         self.branch_sigma_deg = float(branch_sigma_deg)
         self.reset()
@@ -153,6 +155,8 @@ class AnchorTracker:
         self._projections: dict = {}     # this frame's _project_world results
         if getattr(self, "desk", None) is not None:
             self.desk.reset()
+        if getattr(self, "card", None) is not None:
+            self.card.reset()
 
     def _other_branch_wins(self, obs: list[Observation], sol) -> bool:
         """Accumulate evidence between the two IPPE branches when a single planar anchor carries the pose.
@@ -256,6 +260,8 @@ class AnchorTracker:
             self._measure(res, gray, t, obs, sol, covered, desk)
         else:
             self.tracked_keys = set()
+            if self.card is not None:
+                self.card.reset()   # (its points cannot be placed without the marker)
         res.rejected = rejected
         self.ambiguous = res.ambiguous
         res.ms = (time.perf_counter() - t0) * 1000.0
@@ -267,7 +273,7 @@ class AnchorTracker:
         deskewed to the centre row's time, solved, the IPPE branch switched when the image has favoured the
         other for a while, and unstretched along a smear. Returns (obs, rejected, covered, solution or None)."""
         aruco_obs = self._detect_aruco(gray, pred_cfw, fast)
-        qr_obs = self.qr.process(gray, pred_cfw, self._expected_qr(pred_cfw)) if self.qr.models else []
+        qr_obs = self.qr.process(gray, pred_cfw, self.qr.expected(pred_cfw)) if self.qr.models else []
         obs, rejected = self._screen_new(aruco_obs + qr_obs, ref_cfw)
         obs, covered = self._drop_covered(gray, obs, fast, pred_cfw)
         obs = self._deskew(obs, t)
@@ -301,6 +307,9 @@ class AnchorTracker:
         n = len(sol.img)
         extent = max(float(np.linalg.norm(np.ptp(sol.img, axis=0))), 1.0)
         px_sigma = max(sol.rms * np.sqrt(2 * n / max(2 * n - 6, 1)), 0.1)
+        card = None if self.card is None else self.card.update(gray, sol.world, sol.img, sol.camera_from_world,
+                                                               self._lone(obs, sol), px_sigma)
+        raw = raw if card is None else card[0]
         lever = np.sqrt(1.0 + (self.camera.fx / extent) ** 2)
         sigma = 2.0 * px_sigma / extent * lever / np.sqrt(max(n / 4.0, 1.0))
         covered = covered and bool(covered & set(sol.anchors))
@@ -318,6 +327,8 @@ class AnchorTracker:
         if desk is not None and desk.decided:
             # the desk's keypoints hold the tilt the corners cannot: the measurement is as good as its fit
             sigma, centre = max(desk.sigma, 1e-4), None
+        if card is not None:   # so do the card's points, each place the mean of many frames (card.py)
+            sigma, centre = max(card[1] / depth, 1e-4), None
         res.ambiguous = desk is not None and not desk.decided or (desk is None and self._desk_undecided())
         res.desk = desk is not None and desk.decided
         filt = self.filter.update(raw, t, depth, sigma, weight=weight, centre=centre)
@@ -345,9 +356,7 @@ class AnchorTracker:
         otherwise (the desk is then forgotten when no lone marker is seen)."""
         if self.desk is None:
             return None
-        lone = (sol is not None and len(obs) == 1 and len(sol.world) == 4 and len(sol.branches) == 2
-                and self.models[obs[0].anchor].anchor_kind.single_square)
-        if not lone:
+        if not (self._lone(obs, sol) and len(sol.branches) == 2):
             self.desk.reset()
             return None
         if not self.desk.active:
@@ -355,6 +364,11 @@ class AnchorTracker:
             if max(rms) > self.desk_ambiguous_px:
                 return None
         return self.desk.update(gray, t, sol.world, sol.img, [cfw for cfw, _ in sol.branches])
+
+    def _lone(self, obs: list[Observation], sol) -> bool:
+        """Whether a lone square marker's four corners carry this frame's solution `sol`."""
+        return (sol is not None and len(obs) == 1 and len(sol.world) == 4
+                and self.models[obs[0].anchor].anchor_kind.single_square)
 
     def _desk_undecided(self) -> bool:
         return self.desk is not None and self.desk.active and not self.desk.decided
@@ -576,18 +590,6 @@ class AnchorTracker:
         if x1 - x0 < 32 or y1 - y0 < 32 or (x1 - x0) * (y1 - y0) > 0.7 * w * h:
             return None
         return int(x0), int(y0), int(x1), int(y1)
-
-    def _expected_qr(self, cfw: np.ndarray | None) -> set[int] | None:
-        """QR anchors the predicted pose puts (partly) inside the image; None when there is no prediction."""
-        if cfw is None:
-            return None
-        out = set()
-        for m in self.qr.models:
-            px, z = project(self.camera, cfw, m.to_world(square_corners(m.spec.length)))
-            if np.all(z > 0) and np.any((px[:, 0] >= 0) & (px[:, 0] < self.camera.width)
-                                        & (px[:, 1] >= 0) & (px[:, 1] < self.camera.height)):
-                out.add(m.index)
-        return out
 
     def diagnose(self, image: np.ndarray) -> list[str]:
         """Plain-language reasons why the anchors are not (or badly) found in this image; [] when all is well."""

@@ -69,6 +69,7 @@ from tracking.fusion.moving import MovingAnchors
 from tracking.fusion.output import Output
 from tracking.fusion.smear_gate import SmearGate
 from tracking.fusion.state import AnchorMemory, FrameState, TrackResult, TrackStatus
+from tracking.anchors.card import CardPoints
 from tracking.anchors.kinds import AnchorSpec
 from tracking.slam.features import FeatureExtractor, Features
 from tracking.slam.flow import relift
@@ -103,6 +104,9 @@ class Tracker:
         self.anchor_tracker = AnchorTracker(anchors, camera, filter=cfg.filter, cover_fraction=cfg.cover_fraction,
                                             cover_weight=cfg.cover_weight, new_anchor_gate=cfg.new_anchor_gate)
         self._desk = self.anchor_tracker.desk   # its desk judge, off while the anchors move in the room
+        # the card a lone marker is printed on, followed from the first frame, its judge once the marker is seen
+        # to move in the room (`_drop_map`; tracking.anchors.card)
+        self.anchor_tracker.card = CardPoints(camera) if cfg.slam else None
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="anchors") if cfg.slam else None
         n_features = cfg.n_features
         if n_features is None:
@@ -136,6 +140,8 @@ class Tracker:
         self.map.clear()
         self.motion.reset()
         self.anchor_tracker.desk = self._desk   # (back on if the anchors were seen to move: `_drop_map`)
+        if self.anchor_tracker.card is not None:
+            self.anchor_tracker.card.carries = False
         self.anchor_tracker.reset()
         self._fresh_state()
 
@@ -387,6 +393,10 @@ class Tracker:
         if self.anchor_tracker.desk is not None:
             self.anchor_tracker.desk.reset()
             self.anchor_tracker.desk = None
+        # a lone marker's tilt is judged by the card it is printed on instead (its points that move with it,
+        # followed since the first frame: their places rest on many frames by now)
+        if self.anchor_tracker.card is not None:
+            self.anchor_tracker.card.carries = True
 
     def _without_fit(self, ar, pred, markers: int) -> TrackResult:
         """Neither anchors nor the map gave a pose: flow from the last frame, else the partly covered
