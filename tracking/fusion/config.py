@@ -74,6 +74,12 @@ class TrackerConfig:
     flow confirms the motion, the markers' edges across it are soft (`smear_sharpness`) and the flow pose
     puts the marker corners more than `smear_gate_px` from where they were detected, the flow pose is
     used, for at most `smear_hold_s` since the anchors were last accepted."""
+    smear_skip: int = 3
+    """frames: after a detection pass read none of the anchors in a fast pan (they moved `smear_px` or more
+    since the last frame, in view), at most this many flow frames in a row whose motion of the anchors is no
+    smaller skip the pass (`fusion.smear_gate`: the smear is no smaller either); 0: never. Chosen on the
+    tuning pans (fast_motion, tune_fast_pan..._e): every frame's pose was the same with 2 to 6 as with 0;
+    3 keeps a pass at least every fourth frame (a marker moved in the room is found as soon)."""
     smear_sharpness: float = 0.15
     """`anchors.edges.edge_sharpness` below which edges count as smeared (about 1/pixels of smear)."""
     start_sharpness: float = 0.2
@@ -123,4 +129,5 @@ def make_config(config: TrackerConfig | None, overrides: dict) -> TrackerConfig:
     cfg = dataclasses.replace(base, **overrides)
     counts = ("marker_every", "max_pending", "max_lag", "keypoint_every", "precise_blend_frames", "fast_blend_frames")
     return dataclasses.replace(cfg, slam=bool(cfg.slam), anchor_first=bool(cfg.anchor_first),
+                               smear_skip=max(0, int(cfg.smear_skip)),
                                **{name: max(1, int(getattr(cfg, name))) for name in counts})

@@ -43,6 +43,7 @@ class FrameState:
     sharpness: float | None = None
     flow_ran: bool = False
     followed: tuple | None = None
+    anchor_motion: tuple | None = None   # (pixels, view share) the anchors move this frame (`SmearGate.measure`)
 
     def ms(self) -> float:
         """Milliseconds since this frame's tracking began."""

@@ -20,7 +20,9 @@ prediction; the pose is a robust joint fit of marker corners and map points
 (anchors dominate), or of map points alone, or comes from relocalisation. When
 all of that fails on a frame that follows a tracked one (motion blur smears
 markers and descriptors alike), keypoints are followed from the last frame by
-optical flow (`tracking.slam.flow`) and carry the pose. Under fast motion the flow
+optical flow (`tracking.slam.flow`) and carry the pose (while a pan keeps the markers smeared past
+reading, the flow frames after a detection pass that read none of them skip theirs: `SmearGate`,
+`smear_skip`). Under fast motion the flow
 also checks the anchors for smear; when the motion model predicts it, it runs on
 this thread while the anchors are measured on the worker (OpenCV releases the
 interpreter; the results are those of running one after the other), and its
@@ -65,6 +67,7 @@ from tracking.fusion.image import has_content, prepare
 from tracking.fusion.keyframes import Keyframes
 from tracking.fusion.moving import MovingAnchors
 from tracking.fusion.output import Output
+from tracking.fusion.smear_gate import SmearGate
 from tracking.fusion.state import AnchorMemory, FrameState, TrackResult, TrackStatus
 from tracking.anchors.card import CardPoints
 from tracking.anchors.kinds import AnchorSpec
@@ -114,6 +117,7 @@ class Tracker:
         self.motion = MotionModel()
         self.handover = Handover(cfg, camera, self.anchor_tracker, self.motion)
         self.fits = PoseFits(cfg, camera, self.map, self.motion, self.handover)
+        self._outlines = np.concatenate(self.anchor_tracker.outlines)   # every anchor's outline, world (N,3)
         self._fresh_state()
 
     # -- lifecycle ------------------------------------------------------------------
@@ -127,6 +131,7 @@ class Tracker:
         self.output = Output(cfg, self.camera, self.motion)
         self.keyframes = Keyframes(cfg, self.map, self.mapper)
         self.room = MovingAnchors(self.camera, self.handover, self.fits.track_map, cfg.min_inliers)
+        self.smear_gate = SmearGate(self.camera, cfg.smear_px, cfg.smear_skip)
 
     def reset(self) -> None:
         """Forget the map and the motion; the next frame starts from the anchors."""
@@ -270,7 +275,9 @@ class Tracker:
         frames, to get back onto the map. (result or None, the anchors' result, whether detection is
         still to run)."""
         st, t = self.status, self.frame.t
-        fut = self._submit_detection() if detect else None
+        # (a pan that smeared the anchors past reading on the last pass reads them no better while it does
+        # not slow down: `SmearGate`; detection then still runs if the flow fails)
+        fut = self._submit_detection() if detect and not self.smear_gate.skip(self._anchor_motion()) else None
         got = self._follow_from_last()
         if fut is not None:
             ar = fut.result()
@@ -480,9 +487,20 @@ class Tracker:
     def _note_anchors(self, ar) -> None:
         """Remember the corners the anchors measured (for `_fast_predicted` on the next frame), and their result
         on this frame (for `_finish`)."""
+        if ar is not None:
+            read = int(ar.markers) > 0
+            self.smear_gate.passed(read, None if read else self._anchor_motion())
         if ar is not None and ar.raw_world_from_camera is not None and len(ar.object_points) >= 4:
             self.anchor.corners = np.asarray(ar.object_points, float).reshape(-1, 3)
             self.frame.anchors = ar
+
+    def _anchor_motion(self) -> tuple[float, float] | None:
+        """`SmearGate.measure` of every anchor this frame (once a frame), None without a velocity."""
+        frame, motion = self.frame, self.motion
+        if frame.anchor_motion is None and motion.last is not None and motion.velocity is not None:
+            frame.anchor_motion = self.smear_gate.measure(self._outlines, motion.last, motion.predict(frame.t),
+                                                          motion.last_step(), frame.t - motion.last_t)
+        return frame.anchor_motion
 
     def _fast_predicted(self) -> bool:
         """Whether the motion model alone moves the corners the anchors last measured `smear_px` or more in
@@ -541,6 +559,7 @@ class Tracker:
         """A frame without a pose."""
         self.status.lost += 1
         self.anchor.spread = None
+        self.smear_gate.reset()
         self.flow.lose()
         self.motion.lose()
         self.output.lose()

@@ -12,7 +12,6 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from scipy.spatial import cKDTree
-from scipy.spatial.transform import Rotation
 
 from tracking.poses import invert, rotation_angle
 from tracking.slam.features import Features, hamming
@@ -80,6 +79,29 @@ def position_spread(K: np.ndarray, world_from_camera: np.ndarray, X: np.ndarray,
     return float(pixel_sigma * np.sqrt(max(np.trace(cov[3:, 3:]), 0.0)))
 
 
+def _huber_step(K: np.ndarray, Xc: np.ndarray, u: np.ndarray, v: np.ndarray, s2: np.ndarray, w: np.ndarray,
+                huber: float, damp: np.ndarray) -> np.ndarray | None:
+    """One Huber-weighted Gauss-Newton step (6,) of `refine_pose` for camera-frame points Xc (N,3, in front)
+    seen at undistorted pixels (u, v) (N,) each, with expected squared errors s2 (N,) and weights w (N,); None
+    when the normal equations are singular."""
+    fx, fy = K[0, 0], K[1, 1]
+    iz = 1.0 / Xc[:, 2]
+    x, y = Xc[:, 0] * iz, Xc[:, 1] * iz   # normalised image coordinates
+    r = np.empty((iz.size, 2))
+    r[:, 0] = fx * x + K[0, 2] - u
+    r[:, 1] = fy * y + K[1, 2] - v
+    e = np.sqrt((r * r).sum(1) / s2)
+    hw = w * np.where(e <= huber, 1.0, huber / np.maximum(e, 1e-12))
+    J = _pose_jacobian(fx, fy, x, y, iz)
+    JW = J * np.repeat(hw, 2)[:, None]
+    H = JW.T @ J
+    g = JW.T @ r.reshape(-1)
+    try:
+        return -np.linalg.solve(H + damp, g)
+    except np.linalg.LinAlgError:
+        return None
+
+
 def refine_pose(K: np.ndarray, world_from_camera: np.ndarray, X: np.ndarray, uv: np.ndarray,
                 weights: np.ndarray | None = None, rounds: int = 2, iterations: int = 6,
                 huber: float = np.sqrt(CHI2_2D), sigma2: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, float]:
@@ -95,33 +117,26 @@ def refine_pose(K: np.ndarray, world_from_camera: np.ndarray, X: np.ndarray, uv:
     w = np.ones(n) if weights is None else np.asarray(weights, dtype=float)
     s2 = 1.0 / np.maximum(w, 1e-12) if sigma2 is None else np.asarray(sigma2, dtype=float)
     T = invert(world_from_camera)
-    fx, fy = K[0, 0], K[1, 1]
+    damp = 1e-9 * np.eye(6)
     active = np.ones(n, bool)
     for rnd in range(rounds):
+        a = None
         for _ in range(iterations):
-            a = np.nonzero(active)[0]
+            if a is None:
+                # the active points' rows, taken once while the set stays the same
+                a = np.nonzero(active)[0]
+                Xa, ua, va, s2a, wa = X[a], uv[a, 0], uv[a, 1], s2[a], w[a]
             if a.size < 4:
                 break
-            Xc = X[a] @ T[:3, :3].T + T[:3, 3]
+            Xc = Xa @ T[:3, :3].T + T[:3, 3]
             z = Xc[:, 2]
             if np.any(z <= 1e-6):
                 good = z > 1e-6
                 active[a[~good]] = False
+                a = None
                 continue
-            iz = 1.0 / z
-            x, y = Xc[:, 0] * iz, Xc[:, 1] * iz   # normalised image coordinates
-            r = np.empty((a.size, 2))
-            r[:, 0] = fx * x + K[0, 2] - uv[a, 0]
-            r[:, 1] = fy * y + K[1, 2] - uv[a, 1]
-            e = np.sqrt((r * r).sum(1) / s2[a])
-            hw = w[a] * np.where(e <= huber, 1.0, huber / np.maximum(e, 1e-12))
-            J = _pose_jacobian(fx, fy, x, y, iz)
-            JW = J * np.repeat(hw, 2)[:, None]
-            H = JW.T @ J
-            g = JW.T @ r.reshape(-1)
-            try:
-                dx = -np.linalg.solve(H + 1e-9 * np.eye(6), g)
-            except np.linalg.LinAlgError:
+            dx = _huber_step(K, Xc, ua, va, s2a, wa, huber, damp)
+            if dx is None:
                 break
             T = exp_se3(dx) @ T
             # converged: 1e-5 of a twist moves a point at 500 px focal length by 0.005 px (1e-7 cost a
@@ -235,7 +250,9 @@ class MotionModel:
         if self.last is not None and self.last_t is not None and t - self.last_t > 1e-6 and t - self.last_t < 0.5:
             dt = t - self.last_t
             rel = self.last[:3, :3].T @ pose[:3, :3]
-            v = np.concatenate([Rotation.from_matrix(rel).as_rotvec() / dt, (pose[:3, 3] - self.last[:3, 3]) / dt])
+            # (cv2.Rodrigues: scipy's Rotation.from_matrix(rel).as_rotvec() to 1e-12 rad, a twentieth of the time)
+            rotvec = cv2.Rodrigues(np.ascontiguousarray(rel))[0].ravel()
+            v = np.concatenate([rotvec / dt, (pose[:3, 3] - self.last[:3, 3]) / dt])
             self.velocity = v if self.velocity is None else smoothing * v + (1 - smoothing) * self.velocity
             self.steps += 1
             self.before, self.before_t = self.last, self.last_t
