@@ -17,9 +17,10 @@ PRUSALINK := .venv-prusalink
 PRUSALINK_STAMP := $(PRUSALINK)/.installed
 SERVER_STAMPS := $(OCTO_STAMP) $(MOON_STAMP) $(KLIPPY_STAMP) $(PRUSALINK_STAMP)
 
-# `make test` runs the suite in TEST_WORKERS processes (pytest-xdist), one per core of CI's 2-core machine;
-# --dist loadfile keeps each test file on one worker, so its module fixtures are built once; the files go out
-# longest first (tests/conftest.py FILE_SECONDS; --no-loadscope-reorder keeps that order). 0: one process.
+# `make test` runs the suite in TEST_WORKERS processes (pytest-xdist); --dist loadfile keeps each test file on
+# one worker, so its module fixtures are built once, and the files of one real printer server together, so it
+# starts once (tests/conftest.py SERVER_GROUPS, its scheduler); the groups go out longest first (FILE_SECONDS there;
+# --no-loadscope-reorder keeps that order). 0: one process.
 TEST_WORKERS ?= 2
 
 export PYOPENGL_PLATFORM ?= egl

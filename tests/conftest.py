@@ -83,28 +83,63 @@ def pytest_sessionfinish(session, exitstatus):
         _prefetch.wait(timeout=30)
 
 
-# `make test` hands whole files to its workers (--dist loadfile) in the order the tests are collected
-# (--no-loadscope-reorder; xdist's own order puts the files with most tests first, so files of a few long tests,
-# a whole GUI session or a real printer server, came last and one worker ran them alone at the end). The files
-# are sorted here by what each took (seconds, measured on the shared 2-core machine under load: relative
-# figures), longest first, so the short ones fill in at the end; files not listed keep their order after them.
+# `make test` hands whole groups of tests to its workers (--dist loadfile, with the scheduler below): a test file
+# is a group, so its module fixtures are built once, except that the files using one real printer server are one
+# group, so each server starts on one worker only (a session fixture is per worker). Groups go out longest first
+# (--no-loadscope-reorder keeps the order given here; xdist's own puts the groups with most tests first, so
+# files of a few long tests came last and one worker ran them alone at the end): FILE_SECONDS is what each
+# file took (seconds, measured on the shared 2-core machine under load: relative figures); a group counts the
+# sum of its files; files not listed keep their order after them.
 FILE_SECONDS = {
-    "test_slam_sequences.py": 315, "test_synth_recordings.py": 140, "test_anchor_rejection.py": 120,
-    "test_slam_fast_motion.py": 118, "test_app_model.py": 115, "test_gui.py": 91, "test_gui_print.py": 81,
-    "test_moving_anchor.py": 80, "test_gui_scan.py": 79, "test_link_faults.py": 77, "test_scan.py": 71,
-    "test_gui_habits.py": 61, "test_anchor_border_jitter.py": 60, "test_prusalink_server.py": 90,
-    "test_realphotos.py": 38, "test_scan_depth.py": 37, "test_moonraker_server.py": 29, "test_realvideo.py": 29,
-    "test_gui_printer_setup.py": 28, "test_octoprint_server.py": 27, "test_gui_calibration.py": 27,
-    "test_blur_stretch.py": 26, "test_gui_firsthour_window.py": 25, "test_filter_reentry.py": 23,
-    "test_sources.py": 22, "test_slicer_prusa.py": 16, "test_scan_session.py": 14, "test_any_video.py": 14,
-    "test_slam_start.py": 12,
+    "test_synth_recordings.py": 97, "test_prusalink_server.py": 72, "test_slam_sequences.py": 69,
+    "test_realphotos.py": 45, "test_gui_print.py": 43, "test_gui.py": 43, "test_link_faults.py": 35,
+    "test_moving_anchor.py": 32, "test_anchor_rejection.py": 32, "test_realvideo.py": 31, "test_link_busy.py": 30,
+    "test_slam_fast_motion.py": 29, "test_link_serial.py": 26, "test_gui_scan.py": 25, "test_synth.py": 22,
+    "test_gui_habits.py": 22, "test_slicer_prusa.py": 20, "test_gui_printer_setup.py": 19, "test_app_model.py": 18,
+    "test_gui_firsthour_window.py": 17, "test_scan_depth.py": 16, "test_scan.py": 16, "test_any_video.py": 16,
+    "test_moonraker_server.py": 15, "test_slicer.py": 14, "test_pixel_convention.py": 14, "test_anchors.py": 14,
+    "test_octoprint_server.py": 13, "test_render.py": 12, "test_anchor_border_jitter.py": 10,
+    "test_saved_scenes.py": 9, "test_calibration_quality.py": 9, "test_anchor_polarity.py": 9,
+    "test_anchor_discovery.py": 9, "test_synth_camera.py": 7, "test_sources.py": 7, "test_gui_calibration.py": 7,
+    "test_untracked.py": 5, "test_scan_session.py": 5, "test_octoprint_link.py": 5, "test_occlusion.py": 5,
+    "test_link_cli.py": 5, "test_filter_reentry.py": 5, "test_gui_workers.py": 4, "test_gui_print_resume.py": 4,
 }
+# the files that share one real printer server (its session fixture): one group each
+SERVER_GROUPS = {
+    "octoprint": ("test_octoprint_server.py", "test_octoprint_link.py", "test_gui_printer_setup.py"),
+    "moonraker": ("test_moonraker_server.py", "test_gui_printer_setup_moonraker.py", "test_gui_print_moonraker.py"),
+    "prusalink": ("test_prusalink_server.py", "test_prusalink_link.py"),
+}
+GROUP_OF = {f: group for group, files in SERVER_GROUPS.items() for f in files}
+
+
+def group_seconds(group: str) -> float:
+    files = SERVER_GROUPS.get(group, (group,))
+    return sum(FILE_SECONDS.get(f, 0) for f in files)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """xdist's load-by-file scheduling with each server group as one scope (xdist's own --dist loadgroup
+    cannot be used: it renames test ids in a way pytest 9 no longer reads)."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class ServerGroupScheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            path = super()._split_scope(nodeid)
+            return GROUP_OF.get(path.rsplit("/", 1)[-1], path)
+
+    return ServerGroupScheduling(config, log)
 
 
 def pytest_collection_modifyitems(config, items):
-    # a stable sort: each file's tests keep their order (and stay together)
-    items.sort(key=lambda item: -FILE_SECONDS.get(item.path.name, 0))
+    # a stable sort: each group's tests keep their order (and stay together)
+    items.sort(key=lambda item: (-group_seconds(GROUP_OF.get(item.path.name, item.path.name)),
+                                 GROUP_OF.get(item.path.name, item.path.name)))
 
 
 # The real Moonraker + Klippy, started once per session for every test that asks (tests/moonraker_server.py).
 from moonraker_server import moonraker_server  # noqa: E402,F401
+
