@@ -18,6 +18,11 @@ from tracking.slam.frame_pose import position_spread
 # checks in a row on which the background map disagrees with the anchors (`anchor_motion.disagrees`) before
 # the anchors count as moving in the room: one check can meet a flipped lone marker or a map point mismatch
 MOVED_CHECKS = 2
+# frames within which a disagreeing check must be confirmed by the next one, else it is forgotten; while one
+# waits (`MovingAnchors.suspect`) every frame with the anchors is checked (the tracker extracts keypoints on
+# each): a card drifting only half a second before a swing gives one check before the swing, and the next,
+# ten frames later, came only after the still room had carried the card across the swing
+MOVED_WINDOW = 15
 # pixels: the noise taken for a lone marker's or QR code's corners in its expected error (their residual
 # says nothing: four corners fit a pose to hundredths of a pixel whatever its error)
 MARKER_SIGMA_PX = 0.5
@@ -49,8 +54,10 @@ class MovingAnchors:
         self.min_inliers = min_inliers
         self.moving = False   # the anchors were seen to move in the room: map off, flow on them
         self.votes = 0        # background-map checks in a row that disagreed with the anchors
+        self.voted_at = -1    # the frame of the last check that disagreed
         self.strong = False   # the last check that disagreed did so beyond doubt (MOVED_SURE)
         self.ref: tuple | None = None   # (frame, Features, anchors' pose, their outline px) to compare with
+        self.ref_agreed = False   # the background agreed with the anchors between `ref` and the frame before it
         # (frame, Features, the anchors' corners in the image px, their outline px) for the still-background test
         self.still_ref: tuple | None = None
 
@@ -62,6 +69,8 @@ class MovingAnchors:
         to move on this very check (the caller drops the map, which holds the room)."""
         if self.moving or len(feats) < self.min_inliers or ar.covered:
             return False
+        if self.votes and frame - self.voted_at > MOVED_WINDOW:
+            self.votes = 0   # not confirmed in time: a one-off (a mismatch, a hand), forgotten
         # only a board that fits well holds its turn to a few hundredths of a degree; a lone marker's pose turns
         # by a degree with its noise (5-9 px at the image edge: a still desk then reads as moving), so a lone
         # marker is compared with the background in pixels instead
@@ -85,9 +94,16 @@ class MovingAnchors:
             self.votes = 0
             return False
         self.votes += 1
+        self.voted_at = frame
         if self.votes >= MOVED_CHECKS or self.strong:
             self.moving = True
         return self.moving
+
+    @property
+    def suspect(self) -> bool:
+        """A check disagreed and waits for the next to confirm it (within `MOVED_WINDOW` frames): the tracker
+        checks every frame with the anchors until then."""
+        return not self.moving and self.votes > 0
 
     def _still_background_verdict(self, anchor_pose, corners_w, feats, frame: int) -> bool | None:
         """The still-background test for a lone marker or QR code (whose four corners hold the pose too
@@ -133,9 +149,13 @@ class MovingAnchors:
         n, miss = background_rigid(self.camera.K, ref[1:], now[1:])
         if n < MIN_BACKGROUND:
             return None
-        self.ref = now
         if miss > MOVED_MISS:
             # nearly the whole background against the anchors, on many matches: no mismatch or hand does that
             self.strong = miss > MOVED_SURE and n >= 3 * MIN_BACKGROUND
+            if not (self.ref_agreed and self.votes == 0):
+                self.ref, self.ref_agreed = now, False
+            # (else the earlier frame, which its own check found rigid with the room, stays the one to compare
+            # with: the confirming check, a few frames on, needs no new motion to add up first)
             return True
+        self.ref, self.ref_agreed = now, miss < 0.2
         return False if miss < 0.2 else None

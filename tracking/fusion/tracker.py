@@ -241,7 +241,7 @@ class Tracker:
         frame, t = self.frame, self.frame.t
         ar, _ = self._measure_anchors(self._follow_from_last)   # (the flow is kept for this frame)
         pose = anchor_output(ar) if anchor_usable(ar) else None
-        if (pose is None or frame.index - self.status.full_frame >= self.config.keypoint_every
+        if (pose is None or frame.index - self.status.full_frame >= self.config.keypoint_every or self.room.suspect
                 or not self.handover.plausible(pose, self.motion.last, t)):
             return None, ar
         jumped = self.handover.jumped(ar, t)
