@@ -19,7 +19,7 @@ from tracking.slam.frame_pose import position_spread
 # the anchors count as moving in the room: one check can meet a flipped lone marker or a map point mismatch
 MOVED_CHECKS = 2
 # frames within which a disagreeing check must be confirmed by the next one, else it is forgotten; while one
-# waits (`MovingAnchors.suspect`) every frame with the anchors is checked (the tracker extracts keypoints on
+# waits (`MovingAnchors.suspects`) every frame with the anchors is checked (the tracker extracts keypoints on
 # each): a card drifting only half a second before a swing gives one check before the swing, and the next,
 # ten frames later, came only after the still room had carried the card across the swing
 MOVED_WINDOW = 15
@@ -88,6 +88,10 @@ class MovingAnchors:
                 if spread is None:
                     spread = position_spread(self.camera.K, anchor_pose, corners_w, MARKER_SIGMA_PX)
                 verdict = disagrees(anchor_pose, p, spread, map_spread)
+                if not verdict and self.votes:
+                    # under its floor (`anchor_motion.MOVED_FLOOR_M`) the map's test cannot tell a card that
+                    # began to drift from a still one: it does not clear the background's disagreement
+                    verdict = None
         if verdict is None:
             return False   # the background is not matched here: no verdict either way
         if not verdict:
@@ -99,11 +103,10 @@ class MovingAnchors:
             self.moving = True
         return self.moving
 
-    @property
-    def suspect(self) -> bool:
-        """A check disagreed and waits for the next to confirm it (within `MOVED_WINDOW` frames): the tracker
-        checks every frame with the anchors until then."""
-        return not self.moving and self.votes > 0
+    def suspects(self, frame: int) -> bool:
+        """Whether a check disagreed and waits, on `frame`, for the next to confirm it (within `MOVED_WINDOW`
+        frames): the tracker checks every frame with the anchors until then."""
+        return not self.moving and self.votes > 0 and frame - self.voted_at <= MOVED_WINDOW
 
     def _still_background_verdict(self, anchor_pose, corners_w, feats, frame: int) -> bool | None:
         """The still-background test for a lone marker or QR code (whose four corners hold the pose too

@@ -198,7 +198,9 @@ class Tracker:
             return self._lost_frame(0)
         if not self.config.slam:
             return self._marker_only(bgr)
-        if self.room.moving:
+        if self.room.moving or (self.room.suspects(self.frame.index) and self.status.last_state != "marker"):
+            # (a check disagreed, unconfirmed, and the anchors went unread since: the card may be swinging,
+            # so only points on it carry the pose until the anchors are read again and checked)
             return self._moving_anchor_frame()
         return self._slam_frame()
 
@@ -213,6 +215,9 @@ class Tracker:
             res, ar = self._anchors_first()
             if res is not None:
                 return res
+            if self.room.suspects(frame.index) and not (
+                    anchor_usable(ar) and self.handover.plausible(anchor_output(ar), self.motion.last, frame.t)):
+                return self._unread_while_suspect(int(ar.markers))
             detect = False
         elif not detect and cfg.klt:
             res = self._klt_frame()
@@ -241,8 +246,9 @@ class Tracker:
         frame, t = self.frame, self.frame.t
         ar, _ = self._measure_anchors(self._follow_from_last)   # (the flow is kept for this frame)
         pose = anchor_output(ar) if anchor_usable(ar) else None
-        if (pose is None or frame.index - self.status.full_frame >= self.config.keypoint_every or self.room.suspect
-                or not self.handover.plausible(pose, self.motion.last, t)):
+        # (every frame while a check that found the anchors moving in the room waits to be confirmed)
+        if (pose is None or frame.index - self.status.full_frame >= self.config.keypoint_every
+                or self.room.suspects(frame.index) or not self.handover.plausible(pose, self.motion.last, t)):
             return None, ar
         jumped = self.handover.jumped(ar, t)
         got = self._follow_from_last() if self.handover.moving_fast(ar, t) or jumped else None
@@ -402,6 +408,14 @@ class Tracker:
             pose = np.asarray(ar.world_from_camera, float)
             return self._finish(pose, pred, "marker", "anchors", None, n, len(cw))
         return self._lost_frame(markers)
+
+    def _unread_while_suspect(self, markers: int) -> TrackResult:
+        """The anchors are not read while a check that found them moving in the room waits to be confirmed
+        (`MovingAnchors.suspects`): the still room's points must not carry a card that may be swinging, so
+        only flow on points of the anchors does (as once they move), else the frame is lost."""
+        self.frame.flow_ran = False   # (a flow on the room's points may have run beside the anchors)
+        got = self._follow_on_anchors()
+        return self._lost_frame(markers) if got is None else self._flow_result(got, markers)
 
     def _moving_anchor_frame(self) -> TrackResult:
         """A frame once the anchors move in the room (`anchors_moving`): the anchors' pose when they are measured
