@@ -68,9 +68,10 @@ from tracking.fusion.output import Output
 from tracking.fusion.state import AnchorMemory, FrameState, TrackResult, TrackStatus
 from tracking.anchors.card import CardPoints
 from tracking.anchors.kinds import AnchorSpec
+from tracking.slam.anchor_motion import disagrees
 from tracking.slam.features import FeatureExtractor, Features
 from tracking.slam.flow import relift
-from tracking.slam.frame_pose import MotionModel
+from tracking.slam.frame_pose import MotionModel, position_spread
 from tracking.slam.map import Map
 from tracking.slam.map_io import adopt
 from tracking.slam.mapping import LocalMapper
@@ -411,11 +412,26 @@ class Tracker:
 
     def _unread_while_suspect(self, markers: int) -> TrackResult:
         """The anchors are not read while a check that found them moving in the room waits to be confirmed
-        (`MovingAnchors.suspects`): the still room's points must not carry a card that may be swinging, so
-        only flow on points of the anchors does (as once they move), else the frame is lost."""
-        self.frame.flow_ran = False   # (a flow on the room's points may have run beside the anchors)
-        got = self._follow_on_anchors()
-        return self._lost_frame(markers) if got is None else self._flow_result(got, markers)
+        (`MovingAnchors.suspects`): the room's points must not carry a card that may be swinging. One frame of
+        flow on points of the anchors (as once they move) and one on the room's (map points, plane seeds) from
+        the last frame: the room's carries when the two agree (`anchor_motion.disagrees` at 1 px: the card
+        stood still in the room, the check was a one-off), else the anchors'; without the anchors' the frame
+        is lost."""
+        frame, K = self.frame, self.camera.K
+        frame.flow_ran = False   # (one of the flows may have run beside the anchors already)
+        card = self._follow_on_anchors()
+        frame.flow_ran = False
+        room = self._follow_from_last()
+        if card is None:
+            if self.status.lost == 0:
+                self.anchor_tracker.reset()   # (as once they move: a filter carried over would lag the card)
+            return self._lost_frame(markers)
+        got = card
+        if room is not None and not disagrees(card[0], room[0], position_spread(K, card[0], card[1].X, 1.0),
+                                              position_spread(K, room[0], room[1].X, 1.0)):
+            got = room
+        frame.followed = got
+        return self._flow_result(got, markers)
 
     def _moving_anchor_frame(self) -> TrackResult:
         """A frame once the anchors move in the room (`anchors_moving`): the anchors' pose when they are measured
@@ -431,6 +447,8 @@ class Tracker:
                 self.flow.tracks = None if got is None else relift(self.camera, got[1], pose)
                 return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, markers,
                                     int(ar.inliers), precise=precise(ar))
+        if not self.room.moving:
+            return self._unread_while_suspect(markers)
         if got is None:
             got = self._follow_on_anchors()
         if got is not None:
