@@ -1,8 +1,11 @@
 """Anchors that move in the room (a card held up to a webcam): on keypoint frames the background (ORB
 features off the anchors between two checked frames, and the map's points off them) is tested against the
 anchors' poses (`tracking.slam.anchor_motion`), and for a lone marker or QR code, whose pose is too loose for
-that, in pixels: whether the background stood still while the anchors' corners moved. Once it disagrees,
-`MovingAnchors.moving` turns on for the rest of the session and the tracker drops its map."""
+that, in pixels: whether the background stood still while the anchors' corners moved. Once it disagrees
+(twice within `MOVED_WINDOW` frames, or once beyond doubt), `MovingAnchors.moving` turns on for the rest of
+the session and the tracker drops its map. While a first disagreement waits for its confirmation
+(`MovingAnchors.suspects`) the tracker checks every frame the anchors are read on, and the room's own fit does
+not carry a frame they are not read on."""
 
 from __future__ import annotations
 
@@ -55,6 +58,7 @@ class MovingAnchors:
         self.moving = False   # the anchors were seen to move in the room: map off, flow on them
         self.votes = 0        # background-map checks in a row that disagreed with the anchors
         self.voted_at = -1    # the frame of the last check that disagreed
+        self.background_vote = False   # ... and whether the background's own test cast it (not the map's)
         self.strong = False   # the last check that disagreed did so beyond doubt (MOVED_SURE)
         self.ref: tuple | None = None   # (frame, Features, anchors' pose, their outline px) to compare with
         self.ref_agreed = False   # the background agreed with the anchors between `ref` and the frame before it
@@ -79,6 +83,7 @@ class MovingAnchors:
                    if steady and board and fits_well(ar) else None)
         if verdict is None and not board:
             verdict = self._still_background_verdict(anchor_pose, corners_w, feats, frame)
+        by_background = verdict is not None
         off = ~on_anchor(X, self.handover.anchors.outlines)
         if verdict is None and off.sum() >= self.min_inliers:
             p, pi, _, inl = self.track_map(anchor_pose, X[off], D[off], feats)
@@ -88,7 +93,7 @@ class MovingAnchors:
                 if spread is None:
                     spread = position_spread(self.camera.K, anchor_pose, corners_w, MARKER_SIGMA_PX)
                 verdict = disagrees(anchor_pose, p, spread, map_spread)
-                if not verdict and self.votes:
+                if not verdict and self.votes and self.background_vote:
                     # under its floor (`anchor_motion.MOVED_FLOOR_M`) the map's test cannot tell a card that
                     # began to drift from a still one: it does not clear the background's disagreement
                     verdict = None
@@ -98,7 +103,7 @@ class MovingAnchors:
             self.votes = 0
             return False
         self.votes += 1
-        self.voted_at = frame
+        self.voted_at, self.background_vote = frame, by_background
         if self.votes >= MOVED_CHECKS or self.strong:
             self.moving = True
         return self.moving

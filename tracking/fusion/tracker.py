@@ -39,7 +39,10 @@ background (ORB features off the anchors between two checked frames, and the map
 tested against the anchors' poses (`tracking.slam.anchor_motion`; a lone marker's corners against a still
 background, in pixels); once it disagrees, the map is dropped and no longer built, only flow on points of
 the anchors' own plane within their outline carries unreadable frames, a lone marker read again after a
-swing starts the pose even smeared, and a frame nothing on the anchors carries is lost.
+swing starts the pose even smeared, and a frame nothing on the anchors carries is lost. A first
+disagreement is confirmed or forgotten within a few frames: until then every frame the anchors are read on
+is checked, and one they are not read on is carried by flow only (on the anchors' points, or the usual flow
+when the two agree), else lost: a card drifting only half a second before a swing is noticed before it.
 
 Anchor measurements that must not move the model: a lone marker whose white
 margin is partly covered (a hand reaching in, `anchors.occlusion`) is not shown
