@@ -61,7 +61,6 @@ class MovingAnchors:
         self.background_vote = False   # ... and whether the background's own test cast it (not the map's)
         self.strong = False   # the last check that disagreed did so beyond doubt (MOVED_SURE)
         self.ref: tuple | None = None   # (frame, Features, anchors' pose, their outline px) to compare with
-        self.ref_agreed = False   # the background agreed with the anchors between `ref` and the frame before it
         # (frame, Features, the anchors' corners in the image px, their outline px) for the still-background test
         self.still_ref: tuple | None = None
 
@@ -160,10 +159,9 @@ class MovingAnchors:
         if miss > MOVED_MISS:
             # nearly the whole background against the anchors, on many matches: no mismatch or hand does that
             self.strong = miss > MOVED_SURE and n >= 3 * MIN_BACKGROUND
-            if not (self.ref_agreed and self.votes == 0):
-                self.ref, self.ref_agreed = now, False
-            # (else the earlier frame, which its own check found rigid with the room, stays the one to compare
-            # with: the confirming check, a few frames on, needs no new motion to add up first)
+            # the earlier frame stays the one to compare with: the confirming check, a frame or a few on, needs
+            # no new motion to add up first (its anchors' pose, a board that fits well, is good to hundredths of
+            # a degree: what disagrees is this frame's)
             return True
-        self.ref, self.ref_agreed = now, miss < 0.2
+        self.ref = now
         return False if miss < 0.2 else None

@@ -9,7 +9,7 @@ from tracking.synth.presets.parts import webcam_effects
 # Cards held before a camera (tracking.synth.held, issue 25): the anchors on a textured card moved by hand
 # in front of a textured wall, seen by a still webcam (a laptop's) or by a moving camera too ("both").
 # Rendered on demand and cached (tests/scenes.py `held_recording`), not bundled. Tuning ones (scene
-# 331-337, desk 431-437, wall 531-537) may be looked at; test ones (scene 131-134, desk 231-234, wall
+# 331-338, desk 431-438, wall 531-538) may be looked at; test ones (scene 131-134, desk 231-234, wall
 # 251-254) are only measured.
 def _held_keys(seed: int, swings: list[tuple[float, float, list[float], list[float]]],
                duration: float, drift_mm: float = 60.0, rest: tuple[float, float] | None = None) -> list[dict]:
@@ -126,7 +126,8 @@ HELD: dict[str, dict] = {
                             _hand_camera(134, dx=0.13), hfov_deg=62, duration=5.3, rest=(1.6, 4.3)),
     # more of the card put down between swings (issue 25.2), tuning only: the board drifts only about half a
     # second before its first swing while the hand-held camera moves (_b), drifts slower while the camera
-    # moves wider (_c), or drifts slower still (_d)
+    # moves wider (_c), drifts slower still (_d), or half a second
+    # slowly (_e)
     "tune_held_rest_b": _held("tune_held_rest_b", 335, 435, 535, _board(4, 3, 0.035, 0.008, 16), (0.23, 0.18),
                               [(1.3, 0.24, [0.12, 0.0, 0.05], [-5, 7, 3]), (4.4, 0.23, [-0.13, 0.01, -0.04], [4, -9, 0])],
                               _hand_camera(335, dx=0.13), hfov_deg=61, duration=5.3, rest=(1.6, 4.3)),
@@ -136,6 +137,9 @@ HELD: dict[str, dict] = {
     "tune_held_rest_d": _held("tune_held_rest_d", 337, 437, 537, _board(4, 3, 0.035, 0.008, 0), (0.23, 0.18),
                               [(1.3, 0.25, [0.13, -0.01, 0.05], [4, 8, -5]), (4.3, 0.22, [-0.12, 0.01, -0.05], [-6, -7, 4])],
                               _hand_camera(337, dx=0.11), hfov_deg=62, duration=5.2, rest=(1.6, 4.2), drift_mm=35.0),
+    "tune_held_rest_e": _held("tune_held_rest_e", 338, 438, 538, _board(4, 3, 0.034, 0.008, 30), (0.22, 0.18),
+                              [(1.2, 0.23, [-0.12, 0.0, 0.05], [-4, -8, 6]), (4.2, 0.24, [0.13, -0.01, -0.04], [5, 7, -3])],
+                              _hand_camera(338, dx=0.14), hfov_deg=60, duration=5.1, rest=(1.5, 4.1), drift_mm=40.0),
 }
 HELD_TUNING = [n for n in HELD if not n.startswith("test_")]
 HELD_TEST = [n for n in HELD if n.startswith("test_")]
