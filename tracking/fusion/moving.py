@@ -59,6 +59,8 @@ class MovingAnchors:
         self.votes = 0        # background-map checks in a row that disagreed with the anchors
         self.voted_at = -1    # the frame of the last check that disagreed
         self.background_vote = False   # ... and whether the background's own test cast it (not the map's)
+        self.doubted_at = -MOVED_WINDOW - 1   # the frame of the last two-view test that could not say
+        self.ref_agreed = False   # the background agreed with the anchors between `ref` and the frame before it
         self.strong = False   # the last check that disagreed did so beyond doubt (MOVED_SURE)
         self.ref: tuple | None = None   # (frame, Features, anchors' pose, their outline px) to compare with
         # (frame, Features, the anchors' corners in the image px, their outline px) for the still-background test
@@ -112,6 +114,13 @@ class MovingAnchors:
         frames): the tracker checks every frame with the anchors until then."""
         return not self.moving and self.votes > 0 and frame - self.voted_at <= MOVED_WINDOW
 
+    def checks_often(self, frame: int) -> bool:
+        """Whether the anchors are to be checked on every frame they are read on (not only on keypoint frames):
+        while a disagreement waits (`suspects`), and for `MOVED_WINDOW` frames after a two-view test that could
+        not say (a share of the background between `MOVED_MISS` and a fifth against the anchors: a card that
+        has only begun to drift)."""
+        return self.suspects(frame) or (not self.moving and frame - self.doubted_at <= MOVED_WINDOW)
+
     def _still_background_verdict(self, anchor_pose, corners_w, feats, frame: int) -> bool | None:
         """The still-background test for a lone marker or QR code (whose four corners hold the pose too
         loosely to compare poses), in pixels and without any pose: between an earlier checked frame and
@@ -159,9 +168,15 @@ class MovingAnchors:
         if miss > MOVED_MISS:
             # nearly the whole background against the anchors, on many matches: no mismatch or hand does that
             self.strong = miss > MOVED_SURE and n >= 3 * MIN_BACKGROUND
-            # the earlier frame stays the one to compare with: the confirming check, a frame or a few on, needs
-            # no new motion to add up first (its anchors' pose, a board that fits well, is good to hundredths of
-            # a degree: what disagrees is this frame's)
+            if not (self.ref_agreed and n >= 3 * MIN_BACKGROUND and self.votes == 0):
+                self.ref, self.ref_agreed = now, False
+            # (else the earlier frame, which its own check found rigid with the room, stays the one to compare
+            # with: the confirming check, a frame or a few on, needs no new motion to add up first. Not after a
+            # disagreement on few matches: across a fast pan, a frame compared with one from before it mismatches
+            # most of the few background features both hold, and would again on the next frame)
             return True
-        self.ref = now
-        return False if miss < 0.2 else None
+        self.ref, self.ref_agreed = now, miss < 0.2
+        if miss >= 0.2:
+            self.doubted_at = frame   # neither rigid nor against: the next frames tell
+            return None
+        return False

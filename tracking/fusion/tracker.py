@@ -252,7 +252,7 @@ class Tracker:
         pose = anchor_output(ar) if anchor_usable(ar) else None
         # (every frame while a check that found the anchors moving in the room waits to be confirmed)
         if (pose is None or frame.index - self.status.full_frame >= self.config.keypoint_every
-                or self.room.suspects(frame.index) or not self.handover.plausible(pose, self.motion.last, t)):
+                or self.room.checks_often(frame.index) or not self.handover.plausible(pose, self.motion.last, t)):
             return None, ar
         jumped = self.handover.jumped(ar, t)
         got = self._follow_from_last() if self.handover.moving_fast(ar, t) or jumped else None
@@ -328,7 +328,8 @@ class Tracker:
         # while the map is young, features are only needed on frames that may become keyframes
         # (and always when the anchors were just lost: the map has to take over on this very frame)
         need_feats = (not (young and (detect or ar is not None)) or frame.index - kfs.last_frame >= 5
-                      or len(self.map.keyframes) == 0 or (ar is not None and not anchor_usable(ar)))
+                      or len(self.map.keyframes) == 0 or (ar is not None and not anchor_usable(ar))
+                      or self.room.checks_often(frame.index))   # (the anchors' check needs them)
         # an empty map (nothing to match, no keyframe on its way) needs this frame's features only if the
         # anchors are found in it, to start the map: not extracted beside the detection then, but after it
         defer = need_feats and fut is not None and len(self.map.keyframes) == 0 and self.mapper.pending == 0
