@@ -4,8 +4,9 @@ anchors' poses (`tracking.slam.anchor_motion`), and for a lone marker or QR code
 that, in pixels: whether the background stood still while the anchors' corners moved. Once it disagrees
 (twice within `MOVED_WINDOW` frames, or once beyond doubt), `MovingAnchors.moving` turns on for the rest of
 the session and the tracker drops its map. While a first disagreement waits for its confirmation
-(`MovingAnchors.suspects`) the tracker checks every frame the anchors are read on, and the room's own fit does
-not carry a frame they are not read on."""
+(`MovingAnchors.suspects`), and for a while after a two-view test that could not say (`checks_often`), the
+tracker checks every frame the anchors are read on; while one waits, the room's own fit does not carry a frame
+they are not read on."""
 
 from __future__ import annotations
 
