@@ -162,16 +162,17 @@ def test_held_marker_card_is_no_worse_than_plain(name):
     assert all(s in ("marker", "slam") for s, p in zip(r["states"], r["poses"]) if p is not None)
 
 
-@pytest.mark.xfail(strict=True, reason="not met yet (issue 25): on test_held_rest the board starts drifting 0.6 s before "
-                   "its first swing while the hand-held camera moves, and the map's check needs two disagreeing checks "
-                   "10 frames apart: the swing comes first and the still room carries the card 3-14 cm off on 3 "
-                   "frames (the worst 6.5 or 13.8 cm from run to run) (tune_held_rest, drifting a second before its "
-                   "swing, is noticed in time)")
 def test_held_card_put_down_between_swings():
     """Both move, and the board card is put down for 2.5 s between its swings while the camera goes on moving
     (the map stays off once the card was seen to move: letting it back while the card rested placed the
     second swing's smeared start 7 cm off): the goal of the board cards, as many frames as plain OpenCV and
-    none more than 3 cm off."""
+    none more than 3 cm off. The card drifts only ~0.6 s before its first swing; measured on test_held_rest:
+    159 frames placed against plain's 149, the worst 24.7 mm (23.1 in one run of nine; plain 95.3 mm), seen to
+    move from frame 49, after the first swing: a check that disagreed at frame 35 was cleared at 38 by a
+    two-view test over frames in which the card barely moved, and the room's map carried the swing 7-25 mm off
+    (with a check only every tenth frame, before issue 25.2: 155 placed, 138 mm, seen to move from frame 60).
+    The rules were chosen on tune_held_rest and tune_held_rest_b to _e (tracking.synth.presets.HELD), all met
+    there, _d noticed before its swing only by the checks every frame (52 mm and 3 frames over 3 cm without)."""
     r = _run("test_held_rest")
     e, plain = r["errors"], r["plain"]
     assert r["moving"]

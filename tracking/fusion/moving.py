@@ -1,8 +1,12 @@
 """Anchors that move in the room (a card held up to a webcam): on keypoint frames the background (ORB
 features off the anchors between two checked frames, and the map's points off them) is tested against the
 anchors' poses (`tracking.slam.anchor_motion`), and for a lone marker or QR code, whose pose is too loose for
-that, in pixels: whether the background stood still while the anchors' corners moved. Once it disagrees,
-`MovingAnchors.moving` turns on for the rest of the session and the tracker drops its map."""
+that, in pixels: whether the background stood still while the anchors' corners moved. Once it disagrees
+(twice within `MOVED_WINDOW` frames, or once beyond doubt), `MovingAnchors.moving` turns on for the rest of
+the session and the tracker drops its map. While a first disagreement waits for its confirmation
+(`MovingAnchors.suspects`), and for a while after a two-view test that could not say (`checks_often`), the
+tracker checks every frame the anchors are read on; while one waits, the room's own fit does not carry a frame
+they are not read on."""
 
 from __future__ import annotations
 
@@ -18,6 +22,11 @@ from tracking.slam.frame_pose import position_spread
 # checks in a row on which the background map disagrees with the anchors (`anchor_motion.disagrees`) before
 # the anchors count as moving in the room: one check can meet a flipped lone marker or a map point mismatch
 MOVED_CHECKS = 2
+# frames within which a disagreeing check must be confirmed by the next one, else it is forgotten; while one
+# waits (`MovingAnchors.suspects`) every frame with the anchors is checked (the tracker extracts keypoints on
+# each): a card drifting only half a second before a swing gives one check before the swing, and the next,
+# ten frames later, came only after the still room had carried the card across the swing
+MOVED_WINDOW = 15
 # pixels: the noise taken for a lone marker's or QR code's corners in its expected error (their residual
 # says nothing: four corners fit a pose to hundredths of a pixel whatever its error)
 MARKER_SIGMA_PX = 0.5
@@ -49,6 +58,10 @@ class MovingAnchors:
         self.min_inliers = min_inliers
         self.moving = False   # the anchors were seen to move in the room: map off, flow on them
         self.votes = 0        # background-map checks in a row that disagreed with the anchors
+        self.voted_at = -1    # the frame of the last check that disagreed
+        self.background_vote = False   # ... and whether the background's own test cast it (not the map's)
+        self.doubted_at = -MOVED_WINDOW - 1   # the frame of the last two-view test that could not say
+        self.ref_agreed = False   # the background agreed with the anchors between `ref` and the frame before it
         self.strong = False   # the last check that disagreed did so beyond doubt (MOVED_SURE)
         self.ref: tuple | None = None   # (frame, Features, anchors' pose, their outline px) to compare with
         # (frame, Features, the anchors' corners in the image px, their outline px) for the still-background test
@@ -62,6 +75,8 @@ class MovingAnchors:
         to move on this very check (the caller drops the map, which holds the room)."""
         if self.moving or len(feats) < self.min_inliers or ar.covered:
             return False
+        if self.votes and frame - self.voted_at > MOVED_WINDOW:
+            self.votes = 0   # not confirmed in time: a one-off (a mismatch, a hand), forgotten
         # only a board that fits well holds its turn to a few hundredths of a degree; a lone marker's pose turns
         # by a degree with its noise (5-9 px at the image edge: a still desk then reads as moving), so a lone
         # marker is compared with the background in pixels instead
@@ -70,6 +85,7 @@ class MovingAnchors:
                    if steady and board and fits_well(ar) else None)
         if verdict is None and not board:
             verdict = self._still_background_verdict(anchor_pose, corners_w, feats, frame)
+        by_background = verdict is not None
         off = ~on_anchor(X, self.handover.anchors.outlines)
         if verdict is None and off.sum() >= self.min_inliers:
             p, pi, _, inl = self.track_map(anchor_pose, X[off], D[off], feats)
@@ -79,15 +95,32 @@ class MovingAnchors:
                 if spread is None:
                     spread = position_spread(self.camera.K, anchor_pose, corners_w, MARKER_SIGMA_PX)
                 verdict = disagrees(anchor_pose, p, spread, map_spread)
+                if not verdict and self.votes and self.background_vote:
+                    # under its floor (`anchor_motion.MOVED_FLOOR_M`) the map's test cannot tell a card that
+                    # began to drift from a still one: it does not clear the background's disagreement
+                    verdict = None
         if verdict is None:
             return False   # the background is not matched here: no verdict either way
         if not verdict:
             self.votes = 0
             return False
         self.votes += 1
+        self.voted_at, self.background_vote = frame, by_background
         if self.votes >= MOVED_CHECKS or self.strong:
             self.moving = True
         return self.moving
+
+    def suspects(self, frame: int) -> bool:
+        """Whether a check disagreed and waits, on `frame`, for the next to confirm it (within `MOVED_WINDOW`
+        frames): the tracker checks every frame with the anchors until then."""
+        return not self.moving and self.votes > 0 and frame - self.voted_at <= MOVED_WINDOW
+
+    def checks_often(self, frame: int) -> bool:
+        """Whether the anchors are to be checked on every frame they are read on (not only on keypoint frames):
+        while a disagreement waits (`suspects`), and for `MOVED_WINDOW` frames after a two-view test that could
+        not say (a share of the background between `MOVED_MISS` and a fifth against the anchors: a card that
+        has only begun to drift)."""
+        return self.suspects(frame) or (not self.moving and frame - self.doubted_at <= MOVED_WINDOW)
 
     def _still_background_verdict(self, anchor_pose, corners_w, feats, frame: int) -> bool | None:
         """The still-background test for a lone marker or QR code (whose four corners hold the pose too
@@ -133,9 +166,18 @@ class MovingAnchors:
         n, miss = background_rigid(self.camera.K, ref[1:], now[1:])
         if n < MIN_BACKGROUND:
             return None
-        self.ref = now
         if miss > MOVED_MISS:
             # nearly the whole background against the anchors, on many matches: no mismatch or hand does that
             self.strong = miss > MOVED_SURE and n >= 3 * MIN_BACKGROUND
+            if not (self.ref_agreed and n >= 3 * MIN_BACKGROUND and self.votes == 0):
+                self.ref, self.ref_agreed = now, False
+            # (else the earlier frame, which its own check found rigid with the room, stays the one to compare
+            # with: the confirming check, a frame or a few on, needs no new motion to add up first. Not after a
+            # disagreement on few matches: across a fast pan, a frame compared with one from before it mismatches
+            # most of the few background features both hold, and would again on the next frame)
             return True
-        return False if miss < 0.2 else None
+        self.ref, self.ref_agreed = now, miss < 0.2
+        if miss >= 0.2:
+            self.doubted_at = frame   # neither rigid nor against: the next frames tell
+            return None
+        return False

@@ -41,7 +41,10 @@ background (ORB features off the anchors between two checked frames, and the map
 tested against the anchors' poses (`tracking.slam.anchor_motion`; a lone marker's corners against a still
 background, in pixels); once it disagrees, the map is dropped and no longer built, only flow on points of
 the anchors' own plane within their outline carries unreadable frames, a lone marker read again after a
-swing starts the pose even smeared, and a frame nothing on the anchors carries is lost.
+swing starts the pose even smeared, and a frame nothing on the anchors carries is lost. A first
+disagreement is confirmed or forgotten within a few frames: until then every frame the anchors are read on
+is checked, and one they are not read on is carried by flow only (on the anchors' points, or the usual flow
+when the two agree), else lost: a card drifting only half a second before a swing is noticed before it.
 
 Anchor measurements that must not move the model: a lone marker whose white
 margin is partly covered (a hand reaching in, `anchors.occlusion`) is not shown
@@ -71,9 +74,10 @@ from tracking.fusion.smear_gate import SmearGate
 from tracking.fusion.state import AnchorMemory, FrameState, TrackResult, TrackStatus
 from tracking.anchors.card import CardPoints
 from tracking.anchors.kinds import AnchorSpec
+from tracking.slam.anchor_motion import disagrees
 from tracking.slam.features import FeatureExtractor, Features
 from tracking.slam.flow import relift
-from tracking.slam.frame_pose import MotionModel
+from tracking.slam.frame_pose import MotionModel, position_spread
 from tracking.slam.map import Map
 from tracking.slam.map_io import adopt
 from tracking.slam.mapping import LocalMapper
@@ -203,7 +207,9 @@ class Tracker:
             return self._lost_frame(0)
         if not self.config.slam:
             return self._marker_only(bgr)
-        if self.room.moving:
+        if self.room.moving or (self.room.suspects(self.frame.index) and self.status.last_state != "marker"):
+            # (a check disagreed, unconfirmed, and the anchors went unread since: the card may be swinging,
+            # so only points on it carry the pose until the anchors are read again and checked)
             return self._moving_anchor_frame()
         return self._slam_frame()
 
@@ -218,6 +224,9 @@ class Tracker:
             res, ar = self._anchors_first()
             if res is not None:
                 return res
+            if self.room.suspects(frame.index) and not (
+                    anchor_usable(ar) and self.handover.plausible(anchor_output(ar), self.motion.last, frame.t)):
+                return self._unread_while_suspect(int(ar.markers))
             detect = False
         elif not detect and cfg.klt:
             res = self._klt_frame()
@@ -246,8 +255,9 @@ class Tracker:
         frame, t = self.frame, self.frame.t
         ar, _ = self._measure_anchors(self._follow_from_last)   # (the flow is kept for this frame)
         pose = anchor_output(ar) if anchor_usable(ar) else None
+        # (every frame while a check that found the anchors moving in the room waits to be confirmed)
         if (pose is None or frame.index - self.status.full_frame >= self.config.keypoint_every
-                or not self.handover.plausible(pose, self.motion.last, t)):
+                or self.room.checks_often(frame.index) or not self.handover.plausible(pose, self.motion.last, t)):
             return None, ar
         jumped = self.handover.jumped(ar, t)
         got = self._follow_from_last() if self.handover.moving_fast(ar, t) or jumped else None
@@ -325,7 +335,8 @@ class Tracker:
         # while the map is young, features are only needed on frames that may become keyframes
         # (and always when the anchors were just lost: the map has to take over on this very frame)
         need_feats = (not (young and (detect or ar is not None)) or frame.index - kfs.last_frame >= 5
-                      or len(self.map.keyframes) == 0 or (ar is not None and not anchor_usable(ar)))
+                      or len(self.map.keyframes) == 0 or (ar is not None and not anchor_usable(ar))
+                      or self.room.checks_often(frame.index))   # (the anchors' check needs them)
         # an empty map (nothing to match, no keyframe on its way) needs this frame's features only if the
         # anchors are found in it, to start the map: not extracted beside the detection then, but after it
         defer = need_feats and fut is not None and len(self.map.keyframes) == 0 and self.mapper.pending == 0
@@ -410,6 +421,29 @@ class Tracker:
             return self._finish(pose, pred, "marker", "anchors", None, n, len(cw))
         return self._lost_frame(markers)
 
+    def _unread_while_suspect(self, markers: int) -> TrackResult:
+        """The anchors are not read while a check that found them moving in the room waits to be confirmed
+        (`MovingAnchors.suspects`): the room's points must not carry a card that may be swinging. One frame of
+        flow on points of the anchors (as once they move) and one on the room's (map points, plane seeds) from
+        the last frame: the room's carries when the two agree (`anchor_motion.disagrees` at 1 px: the card
+        stood still in the room, the check was a one-off), else the anchors'; without the anchors' the frame
+        is lost."""
+        frame, K = self.frame, self.camera.K
+        frame.flow_ran = False   # (one of the flows may have run beside the anchors already)
+        card = self._follow_on_anchors()
+        frame.flow_ran = False
+        room = self._follow_from_last()
+        if card is None:
+            if self.status.lost == 0:
+                self.anchor_tracker.reset()   # (as once they move: a filter carried over would lag the card)
+            return self._lost_frame(markers)
+        got = card
+        if room is not None and not disagrees(card[0], room[0], position_spread(K, card[0], card[1].X, 1.0),
+                                              position_spread(K, room[0], room[1].X, 1.0)):
+            got = room
+        frame.followed = got
+        return self._flow_result(got, markers)
+
     def _moving_anchor_frame(self) -> TrackResult:
         """A frame once the anchors move in the room (`anchors_moving`): the anchors' pose when they are measured
         (with the start and smear checks of the still case), else optical flow on points of the anchors
@@ -424,6 +458,8 @@ class Tracker:
                 self.flow.tracks = None if got is None else relift(self.camera, got[1], pose)
                 return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, markers,
                                     int(ar.inliers), precise=precise(ar))
+        if not self.room.moving:
+            return self._unread_while_suspect(markers)
         if got is None:
             got = self._follow_on_anchors()
         if got is not None:

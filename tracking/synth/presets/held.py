@@ -9,7 +9,7 @@ from tracking.synth.presets.parts import webcam_effects
 # Cards held before a camera (tracking.synth.held, issue 25): the anchors on a textured card moved by hand
 # in front of a textured wall, seen by a still webcam (a laptop's) or by a moving camera too ("both").
 # Rendered on demand and cached (tests/scenes.py `held_recording`), not bundled. Tuning ones (scene
-# 331-334, desk 431-434, wall 531-534) may be looked at; test ones (scene 131-134, desk 231-234, wall
+# 331-338, desk 431-438, wall 531-538) may be looked at; test ones (scene 131-134, desk 231-234, wall
 # 251-254) are only measured.
 def _held_keys(seed: int, swings: list[tuple[float, float, list[float], list[float]]],
                duration: float, drift_mm: float = 60.0, rest: tuple[float, float] | None = None) -> list[dict]:
@@ -54,10 +54,10 @@ def _held_keys(seed: int, swings: list[tuple[float, float, list[float], list[flo
 
 def _held(name: str, seed: int, desk_seed: int, wall_seed: int, anchor: dict, card: tuple[float, float],
           swings: list, camera: dict, hfov_deg: float = 62.0, dist: list[float] | None = None,
-          duration: float = 4.0, rest: tuple[float, float] | None = None) -> dict:
+          duration: float = 4.0, rest: tuple[float, float] | None = None, drift_mm: float = 60.0) -> dict:
     """A held-card scene: 640x480 at 30 fps, `anchor` on a `card` (width, height m) card held before the
     camera (`camera`: the trajectory block, room frame), webcam effects with motion blur over 60 % of the
-    frame interval (global shutter), a wall 0.8 m behind the card."""
+    frame interval (global shutter), a wall 0.8 m behind the card; `drift_mm`: the card's slow drift, mm/s."""
     return {
         "name": name, "seed": seed, "fps": 30, "duration": duration,
         "camera": {"width": 640, "height": 480, "hfov_deg": hfov_deg, "dist": dist or [-0.06, 0.03, 0.0, 0.0, 0.0]},
@@ -68,7 +68,7 @@ def _held(name: str, seed: int, desk_seed: int, wall_seed: int, anchor: dict, ca
         "video": {"fourcc": "MJPG", "quality": 80},
         "supersample": 2,
         "held": {"wall": {"distance": 0.8, "size": [3.2, 2.6], "ppm": 450, "seed": wall_seed},
-                 "keys": _held_keys(seed, swings, duration, rest=rest)},
+                 "keys": _held_keys(seed, swings, duration, drift_mm=drift_mm, rest=rest)},
     }
 
 
@@ -124,6 +124,22 @@ HELD: dict[str, dict] = {
     "test_held_rest": _held("test_held_rest", 134, 234, 254, _board(4, 3, 0.035, 0.008, 4), (0.23, 0.18),
                             [(1.3, 0.25, [-0.13, 0.01, 0.05], [5, 7, 0]), (4.4, 0.22, [0.12, 0.0, -0.04], [-4, -8, 5])],
                             _hand_camera(134, dx=0.13), hfov_deg=62, duration=5.3, rest=(1.6, 4.3)),
+    # more of the card put down between swings (issue 25.2), tuning only: the board drifts only about half a
+    # second before its first swing while the hand-held camera moves (_b), drifts slower while the camera
+    # moves wider (_c), drifts slower still (_d), or half a second
+    # slowly (_e)
+    "tune_held_rest_b": _held("tune_held_rest_b", 335, 435, 535, _board(4, 3, 0.035, 0.008, 16), (0.23, 0.18),
+                              [(1.3, 0.24, [0.12, 0.0, 0.05], [-5, 7, 3]), (4.4, 0.23, [-0.13, 0.01, -0.04], [4, -9, 0])],
+                              _hand_camera(335, dx=0.13), hfov_deg=61, duration=5.3, rest=(1.6, 4.3)),
+    "tune_held_rest_c": _held("tune_held_rest_c", 336, 436, 536, _board(4, 3, 0.034, 0.008, 24), (0.22, 0.17),
+                              [(1.25, 0.22, [-0.14, 0.01, -0.04], [6, -7, 0]), (4.3, 0.25, [0.12, 0.0, 0.05], [-5, 8, -4])],
+                              _hand_camera(336, dx=0.15), hfov_deg=63, duration=5.2, rest=(1.55, 4.2), drift_mm=45.0),
+    "tune_held_rest_d": _held("tune_held_rest_d", 337, 437, 537, _board(4, 3, 0.035, 0.008, 0), (0.23, 0.18),
+                              [(1.3, 0.25, [0.13, -0.01, 0.05], [4, 8, -5]), (4.3, 0.22, [-0.12, 0.01, -0.05], [-6, -7, 4])],
+                              _hand_camera(337, dx=0.11), hfov_deg=62, duration=5.2, rest=(1.6, 4.2), drift_mm=35.0),
+    "tune_held_rest_e": _held("tune_held_rest_e", 338, 438, 538, _board(4, 3, 0.034, 0.008, 30), (0.22, 0.18),
+                              [(1.2, 0.23, [-0.12, 0.0, 0.05], [-4, -8, 6]), (4.2, 0.24, [0.13, -0.01, -0.04], [5, 7, -3])],
+                              _hand_camera(338, dx=0.14), hfov_deg=60, duration=5.1, rest=(1.5, 4.1), drift_mm=40.0),
 }
 HELD_TUNING = [n for n in HELD if not n.startswith("test_")]
 HELD_TEST = [n for n in HELD if n.startswith("test_")]
