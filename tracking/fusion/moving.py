@@ -60,6 +60,10 @@ class MovingAnchors:
         self.votes = 0        # background-map checks in a row that disagreed with the anchors
         self.voted_at = -1    # the frame of the last check that disagreed
         self.background_vote = False   # ... and whether the background's own test cast it (not the map's)
+        # ... on many matches (3 x MIN_BACKGROUND): only then is it suspected at once (`suspects`); across a
+        # fast pan a frame compared with one from before it mismatches most of the few background features both
+        # hold, and every frame's keypoint work until the next check would follow for nothing
+        self.many = False
         self.doubted_at = -MOVED_WINDOW - 1   # the frame of the last two-view test that could not say
         self.ref_agreed = False   # the background agreed with the anchors between `ref` and the frame before it
         self.strong = False   # the last check that disagreed did so beyond doubt (MOVED_SURE)
@@ -113,7 +117,8 @@ class MovingAnchors:
     def suspects(self, frame: int) -> bool:
         """Whether a check disagreed and waits, on `frame`, for the next to confirm it (within `MOVED_WINDOW`
         frames): the tracker checks every frame with the anchors until then."""
-        return not self.moving and self.votes > 0 and frame - self.voted_at <= MOVED_WINDOW
+        return (not self.moving and self.votes > 0 and frame - self.voted_at <= MOVED_WINDOW
+                and (self.many or not self.background_vote))
 
     def checks_often(self, frame: int) -> bool:
         """Whether the anchors are to be checked on every frame they are read on (not only on keypoint frames):
@@ -169,6 +174,7 @@ class MovingAnchors:
         if miss > MOVED_MISS:
             # nearly the whole background against the anchors, on many matches: no mismatch or hand does that
             self.strong = miss > MOVED_SURE and n >= 3 * MIN_BACKGROUND
+            self.many = n >= 3 * MIN_BACKGROUND
             if not (self.ref_agreed and n >= 3 * MIN_BACKGROUND and self.votes == 0):
                 self.ref, self.ref_agreed = now, False
             # (else the earlier frame, which its own check found rigid with the room, stays the one to compare
