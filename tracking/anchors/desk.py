@@ -32,6 +32,7 @@ from scipy.optimize import least_squares
 from tracking.camera import Camera
 from tracking.poses import from_rvec_tvec, rotation_angle, to_rvec_tvec
 
+REFTRACK = True
 _LK = dict(winSize=(15, 15), maxLevel=2, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01))
 
 
@@ -83,7 +84,7 @@ class DeskPlane:
     the other minimum must fit to be excluded."""
 
     def __init__(self, camera: Camera, max_points: int = 250, min_points: int = 40, marker_px: float = 0.3,
-                 desk_px: float = 0.3, decide_deg: float = 1.0, exclude_chi2: float = 25.0):
+                 desk_px: float = 0.1, decide_deg: float = 1.0, exclude_chi2: float = 25.0):
         self.camera = camera
         self.max_points, self.min_points = int(max_points), int(min_points)
         self.marker_px, self.desk_px = float(marker_px), float(desk_px)
@@ -132,6 +133,7 @@ class DeskPlane:
             return
         pts = pts.reshape(-1, 2).astype(np.float32)
         self._prev_gray, self._prev_px, self._prev_t = gray, pts, t
+        self._ref_gray, self._ref_raw = gray, pts
         self._ref_px, self._ref_deskewed, self._frames = pts, self.camera.readout <= 0, 0
         self._prev2_px, self._prev_dt, self._ref_second, self._followed = None, None, False, 0
         self._ref_x = self._normalised(pts)
@@ -153,12 +155,20 @@ class DeskPlane:
         nxt, st, _ = cv2.calcOpticalFlowPyrLK(self._prev_gray, gray, self._prev_px, None, **_LK)
         back, st2, _ = cv2.calcOpticalFlowPyrLK(gray, self._prev_gray, nxt, None, **_LK)
         ok = (st.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm(back - self._prev_px, axis=1) < 0.5)
+        if REFTRACK and ok.sum() >= 8:
+            H, _ = cv2.findHomography(self._ref_raw[ok], nxt[ok], 0)
+            warped = cv2.warpPerspective(self._ref_gray, H, (gray.shape[1], gray.shape[0]), flags=cv2.INTER_CUBIC)
+            q = cv2.perspectiveTransform(self._ref_raw.reshape(-1, 1, 2).astype(np.float64), H).reshape(-1, 2).astype(np.float32)
+            nxt2, st3, _ = cv2.calcOpticalFlowPyrLK(warped, gray, q, nxt.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **_LK)
+            ok &= (st3.ravel() == 1) & (np.linalg.norm(nxt2 - nxt, axis=1) < 1.0)
+            nxt = nxt2
         h, w = gray.shape
         ok &= (nxt[:, 0] >= 0) & (nxt[:, 0] < w) & (nxt[:, 1] >= 0) & (nxt[:, 1] < h)
         prev = self._prev_px[ok]
         prev2 = None if self._prev2_px is None else self._prev2_px[ok]
         self._prev2_px = prev
         self._prev_px, self._ref_x, self._ref_px = nxt[ok], self._ref_x[ok], self._ref_px[ok]
+        self._ref_raw = self._ref_raw[ok]
         self._prev_gray = gray
         dt = t - self._prev_t if self._prev_t is not None else 0.0
         dt_before, self._prev_dt = self._prev_dt, dt
