@@ -40,12 +40,15 @@ _LK = dict(winSize=(15, 15), maxLevel=2, criteria=(cv2.TERM_CRITERIA_COUNT | cv2
 class DeskFit:
     """One frame's outcome: `camera_from_world` this frame's pose from the marker and the desk together,
     `sigma` its tilt's standard deviation (radians), `decided` whether that settles the marker's pose
-    (tilt known to `decide_deg`, the other minimum excluded), `points` desk points used."""
+    (tilt known to `decide_deg`, the other minimum excluded), `points` desk points used, `noise` the part
+    of `sigma` that changes from frame to frame (radians: this frame's fit with the reference held; the
+    reference's own error is common to every frame until it is refined, a bias no smoothing removes)."""
 
     camera_from_world: np.ndarray
     sigma: float
     decided: bool
     points: int
+    noise: float = 0.0
 
 
 def _params(cfw: np.ndarray) -> np.ndarray:
@@ -283,7 +286,7 @@ class DeskPlane:
         self._last = held[0]
         sigma = float(np.hypot(held[2], self._ref_sigma))
         self.decided = self.decided or (self._excluded and sigma < self.decide)
-        return DeskFit(_pose(held[0]), sigma, self.decided, int(len(xr)))
+        return DeskFit(_pose(held[0]), sigma, self.decided, int(len(xr)), float(held[2]))
 
     def _starts(self, branches: list[np.ndarray]) -> list[np.ndarray]:
         """Starting points [reference pose, this pose] of the joint fit: the last fit (once there is one) and,

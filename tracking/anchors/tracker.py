@@ -325,8 +325,10 @@ class AnchorTracker:
         # far worse than the rest: the filter gives that mode its own, lower gain (filter.py)
         centre = np.mean(sol.world, axis=0) if n <= 4 else None
         if desk is not None and desk.decided:
-            # the desk's keypoints hold the tilt the corners cannot: the measurement is as good as its fit
-            sigma, centre = max(desk.sigma, 1e-4), None
+            # the desk's keypoints hold the tilt the corners cannot: the measurement is as good as its fit,
+            # and its noise from frame to frame is the fit's with the reference held (the reference's error is
+            # common to all frames: counted as noise it let the filter lag a degree behind the hand)
+            sigma, centre = max(desk.noise, 1e-4), None
         if card is not None:   # so do the card's points, each place the mean of many frames (card.py)
             sigma, centre = max(card[1] / depth, 1e-4), None
         res.ambiguous = desk is not None and not desk.decided or (desk is None and self._desk_undecided())
