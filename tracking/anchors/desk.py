@@ -33,6 +33,7 @@ from tracking.camera import Camera
 from tracking.poses import from_rvec_tvec, rotation_angle, to_rvec_tvec
 
 REFTRACK = True
+GAIN = True
 _LK = dict(winSize=(15, 15), maxLevel=2, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01))
 
 
@@ -95,6 +96,7 @@ class DeskPlane:
         self.exclude_chi2 = float(exclude_chi2)
         self.f = float(np.sqrt(camera.fx * camera.fy))
         self.free_every = 5
+        self.max_keys = 6
         self.reset()
 
     def reset(self) -> None:
@@ -117,6 +119,8 @@ class DeskPlane:
         self._ref_second = False                    # the reference's points deskewed with a second-order difference
         self._followed = 0                          # frames followed since the reference
         self._frames = 0                            # frames fitted since the reference was taken
+        self._keys: list[tuple] = []                # frames kept for the reference's refinement: (xr, xc, marker, pose)
+        self._bundled = False                       # the reference is the refinement's (not one pair's)
         self.decided = False
 
     @property
@@ -145,6 +149,7 @@ class DeskPlane:
         self._ref_best = None if ref is None else _params(ref)
         self._ref_sigma = ref_sigma if ref is not None else np.inf
         self._seeded = len(pts)
+        self._keys, self._bundled = [], False
 
     def _follow(self, gray: np.ndarray, t: float) -> np.ndarray:
         """The desk points followed into `gray` (forward-backward checked); keeps only those. Their pixels, moved
@@ -160,7 +165,14 @@ class DeskPlane:
         ok = (st.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm(back - self._prev_px, axis=1) < 0.5)
         if REFTRACK and ok.sum() >= 8:
             H, _ = cv2.findHomography(self._ref_raw[ok], nxt[ok], 0)
-            warped = cv2.warpPerspective(self._ref_gray, H, (gray.shape[1], gray.shape[0]), flags=cv2.INTER_CUBIC)
+            warped = cv2.warpPerspective(self._ref_gray, H, (gray.shape[1], gray.shape[0]), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+            if GAIN:
+                hh, ww = gray.shape
+                small = (ww // 16, hh // 16)
+                gc = cv2.resize(gray.astype(np.float32), small, interpolation=cv2.INTER_AREA)
+                gw = cv2.resize(warped.astype(np.float32), small, interpolation=cv2.INTER_AREA)
+                gain = cv2.resize(gc / np.maximum(gw, 1.0), (ww, hh), interpolation=cv2.INTER_LINEAR)
+                warped = np.clip(warped * gain + 0.5, 0, 255).astype(np.uint8)
             q = cv2.perspectiveTransform(self._ref_raw.reshape(-1, 1, 2).astype(np.float64), H).reshape(-1, 2).astype(np.float32)
             nxt2, st3, _ = cv2.calcOpticalFlowPyrLK(warped, gray, q, nxt.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **_LK)
             ok &= (st3.ravel() == 1) & (np.linalg.norm(nxt2 - nxt, axis=1) < 1.0)
@@ -279,6 +291,8 @@ class DeskPlane:
             self._excluded = best[2] < 2 * self.decide and len(self._ref_branches) < 2
         if best is not None and best[3] < self._ref_sigma:
             self._ref_best, self._ref_sigma = best[0][:6].copy(), best[3]
+        if best is not None and self._excluded and self.max_keys > 0:
+            self._refine(xr, xc, marker_c, best[0][6:])
         start = best[0][6:] if self._last is None else self._last
         held = self._fit(start, marker_c, xr, xc, fixed_ref=self._ref_best)
         if held is None:
@@ -287,6 +301,61 @@ class DeskPlane:
         sigma = float(np.hypot(held[2], self._ref_sigma))
         self.decided = self.decided or (self._excluded and sigma < self.decide)
         return DeskFit(_pose(held[0]), sigma, self.decided, int(len(xr)), float(held[2]))
+
+    def _refine(self, xr: np.ndarray, xc: np.ndarray, marker_c, pose: np.ndarray) -> None:
+        """This frame kept (`_keep`) and the reference pose fitted anew to every kept frame at once
+        (`_bundle_residuals`): the tilt from one pair of frames is as noisy as that pair's flow, from several
+        pairs spread over the camera's path it averages. Kept when its tilt is better determined than the
+        best single pair's."""
+        self._keep(xr, xc, marker_c, pose)
+        if len(self._keys) < 2:
+            return
+        start = np.concatenate([self._ref_best] + [k[3] for k in self._keys])
+        try:
+            r = least_squares(self._bundle_residuals, start, method="trf", x_scale="jac", max_nfev=30,
+                              jac_sparsity=self._bundle_sparsity())
+            J = r.jac.toarray()
+            cov = np.linalg.inv(J.T @ J)
+        except (ValueError, np.linalg.LinAlgError):
+            return
+        sigma = float(np.sqrt(max(np.linalg.eigvalsh(cov[:3, :3]).max(), 0.0)))
+        if sigma < self._ref_sigma or self._bundled:
+            self._ref_best, self._ref_sigma, self._bundled = r.x[:6].copy(), sigma, True
+            self._keys = [k[:3] + (r.x[6 + 6 * i:12 + 6 * i].copy(),) for i, k in enumerate(self._keys)]
+
+    def _keep(self, xr: np.ndarray, xc: np.ndarray, marker_c, pose: np.ndarray) -> None:
+        """Add this frame to the kept ones (at most `max_keys`): when there are too many, the one whose camera
+        is nearest another's (or the reference's) goes, so that those kept span the camera's path."""
+        keys = self._keys + [(xr, xc, marker_c, np.asarray(pose, float).copy())]
+        if len(keys) > self.max_keys:
+            c = np.array([-_rot(p)[0].T @ _rot(p)[1] for p in [self._ref_best] + [k[3] for k in keys]])
+            d = np.linalg.norm(c[:, None] - c[None], axis=2) + np.diag(np.full(len(c), np.inf))
+            keys.pop(int(np.argmin(d[1:].min(axis=1))))
+        self._keys = keys
+
+    def _bundle_sparsity(self) -> np.ndarray:
+        """Which residuals of `_bundle_residuals` each parameter moves: the reference's all, a kept frame's its own."""
+        sizes = [8] + [8 + 2 * len(k[0]) for k in self._keys]
+        S = np.zeros((sum(sizes), 6 * len(sizes)), bool)
+        S[:, :6] = True
+        row = sizes[0]
+        for i, n in enumerate(sizes[1:]):
+            S[row:row + n, 6 + 6 * i:12 + 6 * i] = True
+            row += n
+        return S
+
+    def _bundle_residuals(self, p: np.ndarray) -> np.ndarray:
+        """Normalised residuals (standard deviations) of the reference pose p[:6] and the kept frames' poses
+        (6 each after it): the marker's corners in every frame, each kept frame's desk points transferred
+        from the reference."""
+        Rr, tr = _rot(p[:6])
+        wr, mr = self._ref_marker
+        out = [((_project(Rr, tr, wr) - mr) * (self.f / self.marker_px)).ravel()]
+        for i, (xr, xc, (wc, mc), _) in enumerate(self._keys):
+            Rc, tc = _rot(p[6 + 6 * i:12 + 6 * i])
+            out.append(((_project(Rc, tc, wc) - mc) * (self.f / self.marker_px)).ravel())
+            out.append(((_project(Rc, tc, _lift(Rr, tr, xr)) - xc) * (self.f / self.desk_px)).ravel())
+        return np.concatenate(out)
 
     def _starts(self, branches: list[np.ndarray]) -> list[np.ndarray]:
         """Starting points [reference pose, this pose] of the joint fit: the last fit (once there is one) and,
