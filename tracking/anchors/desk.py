@@ -29,8 +29,14 @@ import cv2
 import numpy as np
 from scipy.optimize import least_squares
 
+from tracking.anchors.desk_bundle import Keys, refine
+from tracking.anchors.desk_geometry import lift as _lift
+from tracking.anchors.desk_geometry import params as _params
+from tracking.anchors.desk_geometry import pose as _pose
+from tracking.anchors.desk_geometry import project as _project
+from tracking.anchors.desk_geometry import rot as _rot
 from tracking.camera import Camera
-from tracking.poses import from_rvec_tvec, rotation_angle, to_rvec_tvec
+from tracking.poses import rotation_angle
 
 REFTRACK = True
 GAIN = True
@@ -50,32 +56,6 @@ class DeskFit:
     decided: bool
     points: int
     noise: float = 0.0
-
-
-def _params(cfw: np.ndarray) -> np.ndarray:
-    r, t = to_rvec_tvec(cfw)
-    return np.concatenate([np.ravel(r), np.ravel(t)])
-
-
-def _pose(p: np.ndarray) -> np.ndarray:
-    return from_rvec_tvec(p[:3], p[3:6])
-
-
-def _rot(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return cv2.Rodrigues(np.asarray(p[:3], np.float64).reshape(3, 1))[0], np.asarray(p[3:6], float)
-
-
-def _project(R: np.ndarray, t: np.ndarray, X: np.ndarray) -> np.ndarray:
-    Xc = X @ R.T + t
-    return Xc[:, :2] / Xc[:, 2:3]
-
-
-def _lift(R: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """World points (N,3) on the plane z = 0 seen at normalised coordinates x (N,2) by camera (R, t)."""
-    c = -R.T @ t
-    d = np.column_stack([x, np.ones(len(x))]) @ R   # rows: R^T [x, y, 1]
-    lam = -c[2] / np.where(np.abs(d[:, 2]) > 1e-9, d[:, 2], 1e-9)
-    return c + lam[:, None] * d
 
 
 class DeskPlane:
@@ -165,7 +145,7 @@ class DeskPlane:
         ok = (st.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm(back - self._prev_px, axis=1) < 0.5)
         if REFTRACK and ok.sum() >= 8:
             H, _ = cv2.findHomography(self._ref_raw[ok], nxt[ok], 0)
-            warped = cv2.warpPerspective(self._ref_gray, H, (gray.shape[1], gray.shape[0]), flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+            warped = cv2.warpPerspective(self._ref_gray, H, (gray.shape[1], gray.shape[0]), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
             if GAIN:
                 hh, ww = gray.shape
                 small = (ww // 16, hh // 16)
@@ -174,7 +154,7 @@ class DeskPlane:
                 gain = cv2.resize(gc / np.maximum(gw, 1.0), (ww, hh), interpolation=cv2.INTER_LINEAR)
                 warped = np.clip(warped * gain + 0.5, 0, 255).astype(np.uint8)
             q = cv2.perspectiveTransform(self._ref_raw.reshape(-1, 1, 2).astype(np.float64), H).reshape(-1, 2).astype(np.float32)
-            nxt2, st3, _ = cv2.calcOpticalFlowPyrLK(warped, gray, q, nxt.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **_LK)
+            nxt2, st3, _ = cv2.calcOpticalFlowPyrLK(warped, gray, q, nxt.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **{**_LK, "maxLevel": 0})
             ok &= (st3.ravel() == 1) & (np.linalg.norm(nxt2 - nxt, axis=1) < 1.0)
             nxt = nxt2
         h, w = gray.shape
@@ -274,88 +254,75 @@ class DeskPlane:
         marker_c = (np.asarray(world, float), self._normalised(img))
         self._frames += 1
         fits = []
-        if not self.decided or self._frames % self.free_every == 0:
-            # the joint fit with the reference pose free (every `free_every` frames once decided: it only
-            # improves the reference as the camera moves further)
+        if not self.decided or (not self._bundled and self._frames % self.free_every == 0):
+            # the joint fit with the reference pose free (every `free_every` frames once decided, until the
+            # kept frames' bundle takes the reference over: it only improves as the camera moves further)
             fits = [f for f in (self._fit(s, marker_c, xr, xc) for s in self._starts(branches)) if f is not None]
             fits.sort(key=lambda f: f[1])
         if not fits and self._ref_best is None:
             return None
         best = fits[0] if fits else None
-        if best is not None and not self._excluded and len(fits) > 1:
-            other = next((f for f in fits[1:] if rotation_angle(_rot(f[0][6:])[0] @ _rot(best[0][6:])[0].T)
-                          > 3 * max(best[2], np.radians(0.3))), None)
-            # the other minimum fits clearly worse (or is no minimum: the fit from it came to this one)
-            self._excluded = (other is None or other[1] - best[1] > self.exclude_chi2) and best[2] < 2 * self.decide
-        elif best is not None and len(fits) == 1 and not self._excluded:
-            self._excluded = best[2] < 2 * self.decide and len(self._ref_branches) < 2
-        if best is not None and best[3] < self._ref_sigma:
-            self._ref_best, self._ref_sigma = best[0][:6].copy(), best[3]
-        if best is not None and self._excluded and self.max_keys > 0:
-            self._refine(xr, xc, marker_c, best[0][6:])
+        if best is not None:
+            self._judge(fits)
+            if best[3] < self._ref_sigma:
+                self._ref_best, self._ref_sigma = best[0][:6].copy(), best[3]
+            if self._excluded:
+                self._refine(xr, xc, marker_c, best[0][6:])
         start = best[0][6:] if self._last is None else self._last
         held = self._fit(start, marker_c, xr, xc, fixed_ref=self._ref_best)
         if held is None:
             return None
+        if best is None and self._frames % self.free_every == 0:
+            self._refine(xr, xc, marker_c, held[0])
         self._last = held[0]
         sigma = float(np.hypot(held[2], self._ref_sigma))
         self.decided = self.decided or (self._excluded and sigma < self.decide)
         return DeskFit(_pose(held[0]), sigma, self.decided, int(len(xr)), float(held[2]))
 
+    def _judge(self, fits: list[tuple]) -> None:
+        """Whether the other minimum is excluded, from this frame's joint fits (best first)."""
+        best = fits[0]
+        if self._excluded:
+            return
+        if len(fits) > 1:
+            other = next((f for f in fits[1:] if rotation_angle(_rot(f[0][6:])[0] @ _rot(best[0][6:])[0].T)
+                          > 3 * max(best[2], np.radians(0.3))), None)
+            # the other minimum fits clearly worse (or is no minimum: the fit from it came to this one)
+            self._excluded = (other is None or other[1] - best[1] > self.exclude_chi2) and best[2] < 2 * self.decide
+        else:
+            self._excluded = best[2] < 2 * self.decide and len(self._ref_branches) < 2
+
     def _refine(self, xr: np.ndarray, xc: np.ndarray, marker_c, pose: np.ndarray) -> None:
-        """This frame kept (`_keep`) and the reference pose fitted anew to every kept frame at once
-        (`_bundle_residuals`): the tilt from one pair of frames is as noisy as that pair's flow, from several
-        pairs spread over the camera's path it averages. Kept when its tilt is better determined than the
-        best single pair's."""
-        self._keep(xr, xc, marker_c, pose)
-        if len(self._keys) < 2:
+        """This frame kept (`_keep`) and, when that changed the kept frames, the reference pose fitted anew to
+        all of them at once (desk_bundle.refine): the tilt from one pair of frames is as noisy as that pair's
+        flow, from several pairs spread over the camera's path it averages. Taken once it is better
+        determined than the best single pair's."""
+        if self.max_keys <= 0 or not self._keep(xr, xc, marker_c, pose) or len(self._keys) < 2:
             return
         start = np.concatenate([self._ref_best] + [k[3] for k in self._keys])
-        try:
-            r = least_squares(self._bundle_residuals, start, method="trf", x_scale="jac", max_nfev=30,
-                              jac_sparsity=self._bundle_sparsity())
-            J = r.jac.toarray()
-            cov = np.linalg.inv(J.T @ J)
-        except (ValueError, np.linalg.LinAlgError):
+        out = refine(start, self._ref_marker, Keys.pack([k[:3] for k in self._keys]), self.f / self.marker_px,
+                     self.f / self.desk_px)
+        if out is None:
             return
-        sigma = float(np.sqrt(max(np.linalg.eigvalsh(cov[:3, :3]).max(), 0.0)))
+        x, sigma = out
         if sigma < self._ref_sigma or self._bundled:
-            self._ref_best, self._ref_sigma, self._bundled = r.x[:6].copy(), sigma, True
-            self._keys = [k[:3] + (r.x[6 + 6 * i:12 + 6 * i].copy(),) for i, k in enumerate(self._keys)]
+            self._ref_best, self._ref_sigma, self._bundled = x[:6].copy(), sigma, True
+            self._keys = [k[:3] + (x[6 + 6 * i:12 + 6 * i].copy(),) for i, k in enumerate(self._keys)]
 
-    def _keep(self, xr: np.ndarray, xc: np.ndarray, marker_c, pose: np.ndarray) -> None:
+    def _keep(self, xr: np.ndarray, xc: np.ndarray, marker_c, pose: np.ndarray) -> bool:
         """Add this frame to the kept ones (at most `max_keys`): when there are too many, the one whose camera
-        is nearest another's (or the reference's) goes, so that those kept span the camera's path."""
+        is nearest another's (or the reference's) goes, so that those kept span the camera's path. Whether
+        this frame stayed (False: the kept frames are as they were)."""
         keys = self._keys + [(xr, xc, marker_c, np.asarray(pose, float).copy())]
         if len(keys) > self.max_keys:
             c = np.array([-_rot(p)[0].T @ _rot(p)[1] for p in [self._ref_best] + [k[3] for k in keys]])
             d = np.linalg.norm(c[:, None] - c[None], axis=2) + np.diag(np.full(len(c), np.inf))
-            keys.pop(int(np.argmin(d[1:].min(axis=1))))
+            drop = int(np.argmin(d[1:].min(axis=1)))
+            if drop == len(keys) - 1:
+                return False
+            keys.pop(drop)
         self._keys = keys
-
-    def _bundle_sparsity(self) -> np.ndarray:
-        """Which residuals of `_bundle_residuals` each parameter moves: the reference's all, a kept frame's its own."""
-        sizes = [8] + [8 + 2 * len(k[0]) for k in self._keys]
-        S = np.zeros((sum(sizes), 6 * len(sizes)), bool)
-        S[:, :6] = True
-        row = sizes[0]
-        for i, n in enumerate(sizes[1:]):
-            S[row:row + n, 6 + 6 * i:12 + 6 * i] = True
-            row += n
-        return S
-
-    def _bundle_residuals(self, p: np.ndarray) -> np.ndarray:
-        """Normalised residuals (standard deviations) of the reference pose p[:6] and the kept frames' poses
-        (6 each after it): the marker's corners in every frame, each kept frame's desk points transferred
-        from the reference."""
-        Rr, tr = _rot(p[:6])
-        wr, mr = self._ref_marker
-        out = [((_project(Rr, tr, wr) - mr) * (self.f / self.marker_px)).ravel()]
-        for i, (xr, xc, (wc, mc), _) in enumerate(self._keys):
-            Rc, tc = _rot(p[6 + 6 * i:12 + 6 * i])
-            out.append(((_project(Rc, tc, wc) - mc) * (self.f / self.marker_px)).ravel())
-            out.append(((_project(Rc, tc, _lift(Rr, tr, xr)) - xc) * (self.f / self.desk_px)).ravel())
-        return np.concatenate(out)
+        return True
 
     def _starts(self, branches: list[np.ndarray]) -> list[np.ndarray]:
         """Starting points [reference pose, this pose] of the joint fit: the last fit (once there is one) and,
