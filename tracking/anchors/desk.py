@@ -11,11 +11,18 @@ and, once the camera has moved sideways a little, the plane's normal: the tilt t
 and this frame's pose together to the marker's corners in both frames and to the desk points' transfer
 between them (every desk point lifted onto the marker's plane z = 0 from the reference view, and
 projected into this one). The fit starts from both IPPE branches; the tilt's standard deviation comes
-from the fit's Jacobian. The best-determined reference pose so far is kept, and this frame's pose is then
-fitted with the reference held there (the desk points are then a map on the marker's plane): its precision
-no longer falls when the camera comes back toward where the reference was taken. Until the tilt is known
-to `decide_deg` and the other minimum fits clearly worse, the result says undecided (the caller shows the
-marker's own pose and asks the user to tilt the camera).
+from the fit's Jacobian. Once the other minimum is excluded, frames spread over the camera's path are kept
+and the reference pose is fitted to all of them at once (desk_bundle.py: one pair's tilt is a third to half
+a degree off with a hand's baseline, several pairs average it). This frame's pose is then fitted with the
+reference held there (the desk points are then a map on the marker's plane): its precision no longer falls
+when the camera comes back toward where the reference was taken. Until the tilt is known to `decide_deg`
+and the other minimum fits clearly worse, the result says undecided (the caller shows the marker's own pose
+and asks the user to tilt the camera).
+
+The desk points are followed frame to frame by optical flow and then matched again against the reference
+image warped onto this frame (desk_match.py): plain flow matched each point's patch a few tenths of a pixel
+off as the view scaled, turned and brightened, the same way in every frame, and that, not the flow's
+noise, was what kept the tilt half a degree off.
 
 Poses are 4x4 camera_from_world (world = the marker's anchor world, metres); pixels are distorted image
 pixels as `camera` says.
@@ -35,11 +42,10 @@ from tracking.anchors.desk_geometry import params as _params
 from tracking.anchors.desk_geometry import pose as _pose
 from tracking.anchors.desk_geometry import project as _project
 from tracking.anchors.desk_geometry import rot as _rot
+from tracking.anchors.desk_match import match_to_reference
 from tracking.camera import Camera
 from tracking.poses import rotation_angle
 
-REFTRACK = True
-GAIN = True
 _LK = dict(winSize=(15, 15), maxLevel=2, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01))
 
 
@@ -63,9 +69,11 @@ class DeskPlane:
 
     camera: intrinsics of the images; max_points: desk keypoints seeded (goodFeaturesToTrack); min_points:
     fewer followed points than this and the reference is taken anew; marker_px / desk_px: the pixel noise
-    taken for the marker's corners and for the desk points' flow; decide_deg: the tilt's standard deviation
+    taken for the marker's corners and for the desk points (0.1: matched against the reference, their residual
+    at the true poses is 0.07 px on the tuning recordings); decide_deg: the tilt's standard deviation
     (degrees) under which it counts as decided; exclude_chi2: how much worse (in squared standard deviations)
-    the other minimum must fit to be excluded."""
+    the other minimum must fit to be excluded. `max_keys`: frames kept for the reference's bundle (0: none,
+    the best single pair's reference is kept)."""
 
     def __init__(self, camera: Camera, max_points: int = 250, min_points: int = 40, marker_px: float = 0.3,
                  desk_px: float = 0.1, decide_deg: float = 1.0, exclude_chi2: float = 25.0):
@@ -92,6 +100,7 @@ class DeskPlane:
         self._excluded = False                      # the other minimum was seen to fit clearly worse
         self._seeded = 0
         self._ref_px: np.ndarray | None = None     # the desk points in the reference frame (pixels, as seen)
+        self._ref_gray: np.ndarray | None = None    # the reference frame's image
         self._ref_deskewed = False                  # ... moved to the reference's centre-row time yet
         self._prev_t: float | None = None
         self._prev2_px: np.ndarray | None = None    # the desk points two frames back (pixels, as seen)
@@ -120,7 +129,7 @@ class DeskPlane:
             return
         pts = pts.reshape(-1, 2).astype(np.float32)
         self._prev_gray, self._prev_px, self._prev_t = gray, pts, t
-        self._ref_gray, self._ref_raw = gray, pts
+        self._ref_gray = gray
         self._ref_px, self._ref_deskewed, self._frames = pts, self.camera.readout <= 0, 0
         self._prev2_px, self._prev_dt, self._ref_second, self._followed = None, None, False, 0
         self._ref_x = self._normalised(pts)
@@ -132,7 +141,8 @@ class DeskPlane:
         self._keys, self._bundled = [], False
 
     def _follow(self, gray: np.ndarray, t: float) -> np.ndarray:
-        """The desk points followed into `gray` (forward-backward checked); keeps only those. Their pixels, moved
+        """The desk points followed into `gray` (forward-backward checked, then matched again against the
+        reference image: desk_match); keeps only those. Their pixels, moved
         to the frame's centre-row time for a rolling shutter (`camera.readout`): each point by the image
         velocity at this frame's time times its row's offset. The velocity is the backward difference over the
         last two frames (second order, exact for a steady acceleration: the one-frame difference is the
@@ -143,27 +153,14 @@ class DeskPlane:
         nxt, st, _ = cv2.calcOpticalFlowPyrLK(self._prev_gray, gray, self._prev_px, None, **_LK)
         back, st2, _ = cv2.calcOpticalFlowPyrLK(gray, self._prev_gray, nxt, None, **_LK)
         ok = (st.ravel() == 1) & (st2.ravel() == 1) & (np.linalg.norm(back - self._prev_px, axis=1) < 0.5)
-        if REFTRACK and ok.sum() >= 8:
-            H, _ = cv2.findHomography(self._ref_raw[ok], nxt[ok], 0)
-            warped = cv2.warpPerspective(self._ref_gray, H, (gray.shape[1], gray.shape[0]), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            if GAIN:
-                hh, ww = gray.shape
-                small = (ww // 16, hh // 16)
-                gc = cv2.resize(gray.astype(np.float32), small, interpolation=cv2.INTER_AREA)
-                gw = cv2.resize(warped.astype(np.float32), small, interpolation=cv2.INTER_AREA)
-                gain = cv2.resize(gc / np.maximum(gw, 1.0), (ww, hh), interpolation=cv2.INTER_LINEAR)
-                warped = np.clip(warped * gain + 0.5, 0, 255).astype(np.uint8)
-            q = cv2.perspectiveTransform(self._ref_raw.reshape(-1, 1, 2).astype(np.float64), H).reshape(-1, 2).astype(np.float32)
-            nxt2, st3, _ = cv2.calcOpticalFlowPyrLK(warped, gray, q, nxt.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **{**_LK, "maxLevel": 0})
-            ok &= (st3.ravel() == 1) & (np.linalg.norm(nxt2 - nxt, axis=1) < 1.0)
-            nxt = nxt2
+        # each point matched again against the reference image warped onto this frame (desk_match)
+        nxt, ok = match_to_reference(self._ref_gray, self._ref_px, gray, nxt, ok)
         h, w = gray.shape
         ok &= (nxt[:, 0] >= 0) & (nxt[:, 0] < w) & (nxt[:, 1] >= 0) & (nxt[:, 1] < h)
         prev = self._prev_px[ok]
         prev2 = None if self._prev2_px is None else self._prev2_px[ok]
         self._prev2_px = prev
         self._prev_px, self._ref_x, self._ref_px = nxt[ok], self._ref_x[ok], self._ref_px[ok]
-        self._ref_raw = self._ref_raw[ok]
         self._prev_gray = gray
         dt = t - self._prev_t if self._prev_t is not None else 0.0
         dt_before, self._prev_dt = self._prev_dt, dt
