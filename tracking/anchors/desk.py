@@ -72,16 +72,21 @@ class DeskPlane:
     taken for the marker's corners and for the desk points (0.1: matched against the reference, their residual
     at the true poses is 0.07 px on the tuning recordings); decide_deg: the tilt's standard deviation
     (degrees) under which it counts as decided; exclude_chi2: how much worse (in squared standard deviations)
-    the other minimum must fit to be excluded. `max_keys`: frames kept for the reference's bundle (0: none,
+    the other minimum must fit to be excluded; rigid_sigmas: the marker's corners off by more than this
+    (RMS, in `marker_px`) from this frame's fit with the reference held, and the marker is taken to move
+    against the desk (`loose`: the desk is not followed until `reset`; the tuning head-on recordings reach
+    0.3 px, a card waved before a wall, tune_held_marker, 0.7 px a quarter second in). `max_keys`: frames kept for the reference's bundle (0: none,
     the best single pair's reference is kept)."""
 
     def __init__(self, camera: Camera, max_points: int = 250, min_points: int = 40, marker_px: float = 0.3,
-                 desk_px: float = 0.1, decide_deg: float = 1.0, exclude_chi2: float = 25.0):
+                 desk_px: float = 0.1, decide_deg: float = 1.0, exclude_chi2: float = 25.0,
+                 rigid_sigmas: float = 2.0):
         self.camera = camera
         self.max_points, self.min_points = int(max_points), int(min_points)
         self.marker_px, self.desk_px = float(marker_px), float(desk_px)
         self.decide = np.radians(decide_deg)
         self.exclude_chi2 = float(exclude_chi2)
+        self.rigid_sigmas = float(rigid_sigmas)
         self.f = float(np.sqrt(camera.fx * camera.fy))
         self.free_every = 5
         self.max_keys = 6
@@ -111,6 +116,7 @@ class DeskPlane:
         self._keys: list[tuple] = []                # frames kept for the reference's refinement: (xr, xc, marker, pose)
         self._bundled = False                       # the reference is the refinement's (not one pair's)
         self.decided = False
+        self.loose = False                          # the marker was seen to move against the desk
 
     @property
     def active(self) -> bool:
@@ -231,6 +237,8 @@ class DeskPlane:
         if len(branches) == 0 or len(world) < 4:
             self.reset()
             return None
+        if self.loose:
+            return None
         if not self.active or self._prev_gray is None or self._prev_gray.shape != gray.shape:
             self._seed(gray, t, world, img, branches, None, np.inf)
             return None
@@ -268,6 +276,13 @@ class DeskPlane:
         start = best[0][6:] if self._last is None else self._last
         held = self._fit(start, marker_c, xr, xc, fixed_ref=self._ref_best)
         if held is None:
+            return None
+        corners = self._residuals(held[0], marker_c, xr, xc, self._ref_best)[:8]
+        if float(np.sqrt(np.mean(corners ** 2))) > self.rigid_sigmas:
+            # the marker's corners do not follow the desk: it moves against it (a card held before a wall),
+            # and the desk says nothing of its tilt until the marker is lost and found again
+            self.reset()
+            self.loose = True
             return None
         if best is None and self._frames % self.free_every == 0:
             self._refine(xr, xc, marker_c, held[0])
