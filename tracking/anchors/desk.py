@@ -154,7 +154,10 @@ class DeskPlane:
         last two frames (second order, exact for a steady acceleration: the one-frame difference is the
         velocity half a frame earlier, and a hand's shake changes it by a tenth of a pixel over a readout),
         smoothed by a quadratic field over all points (`_smooth`); over the first frame alone, the one-frame
-        difference. The reference frame's points likewise, with the forward difference: of first order on the
+        difference. The differences are of positions each read at its row's time, so the velocity is the one
+        at the row's time, d after the frame's: the move back over d is v d - a d^2 / 2, with the acceleration
+        a from the second difference (as smoothed; up to 0.1 px at the top and bottom rows for a hand's
+        shake). The reference frame's points likewise, with the forward difference: of first order on the
         frame after it, then of second order on the frame after that."""
         nxt, st, _ = cv2.calcOpticalFlowPyrLK(self._prev_gray, gray, self._prev_px, None, **_LK)
         back, st2, _ = cv2.calcOpticalFlowPyrLK(gray, self._prev_gray, nxt, None, **_LK)
@@ -179,13 +182,16 @@ class DeskPlane:
         second = prev2 is not None and dt_before is not None and abs(dt_before - dt) < 0.2 * dt
         vel = (3.0 * cur - 4.0 * prev + prev2) / (2.0 * dt) if second else (cur - prev) / dt
         vel = self._smooth(cur, vel)
+        acc = self._smooth(cur, (cur - 2.0 * prev + prev2) / (dt * dt)) if second else np.zeros_like(vel)
         second_ref = second and self._followed == 2   # prev2: the reference's own points, prev: the next frame's
         if not self._ref_deskewed or (second_ref and not self._ref_second):
             x0 = self._ref_px
             v0 = (-3.0 * x0 + 4.0 * prev - cur) / (2.0 * dt) if second_ref else (cur - prev) / dt
-            ref = x0 - self._smooth(x0, v0) * self.camera.row_offsets(x0[:, 1])[:, None]
+            d0 = self.camera.row_offsets(x0[:, 1])[:, None]
+            ref = x0 - self._smooth(x0, v0) * d0 + (0.5 * acc * d0 * d0 if second_ref else 0.0)
             self._ref_x, self._ref_deskewed, self._ref_second = self._normalised(ref), True, second_ref
-        return cur - vel * self.camera.row_offsets(cur[:, 1])[:, None]
+        d = self.camera.row_offsets(cur[:, 1])[:, None]
+        return cur - vel * d + 0.5 * acc * d * d
 
     def _smooth(self, px: np.ndarray, vel: np.ndarray) -> np.ndarray:
         """The image velocities `vel` (N,2 pixels/s) at pixels `px` (N,2) replaced by a quadratic field in the

@@ -40,10 +40,11 @@ class Keys:
                     np.array([k[2][0] for k in frames], float), np.array([k[2][1] for k in frames], float))
 
 
-def residuals(p: np.ndarray, ref_marker: tuple, keys: Keys, marker_scale: float, desk_scale: float) -> np.ndarray:
+def residuals(p: np.ndarray, ref_marker: tuple, keys: Keys, marker_scale: float, desk_scale) -> np.ndarray:
     """Residuals of the reference pose p[:6] and the keys' poses (6 each after it): the marker's corners in
     the reference (`ref_marker`: world (4,3), normalised (4,2)) and in every key (times `marker_scale`), every
-    key's desk points lifted onto z = 0 from the reference and projected into the key (times `desk_scale`).
+    key's desk points lifted onto z = 0 from the reference and projected into the key (times `desk_scale`, a
+    number or one per point, (M,1)).
     Laid out [reference corners (8), keys' corners (8 each), desk points (2 each)]."""
     Rr, tr = rot(p[:6])
     n = len(keys.world)
@@ -82,18 +83,37 @@ def jacobian(fun, p: np.ndarray, rows: np.ndarray, step: float = 1e-7) -> np.nda
     return J
 
 
+def _solve(fun, start: np.ndarray, rows: np.ndarray, max_nfev: int):
+    """Levenberg-Marquardt on `fun` from `start` with `jacobian`: the solution, or None when it fails."""
+    try:
+        return least_squares(fun, start, jac=lambda q: jacobian(fun, q, rows), method="lm", x_scale="jac",
+                             max_nfev=max_nfev)
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+
+
 def refine(start: np.ndarray, ref_marker: tuple, keys: Keys, marker_scale: float, desk_scale: float,
            max_nfev: int = 10) -> tuple[np.ndarray, float] | None:
     """The reference and keys' poses (start: [reference, key 0, key 1, ...]) fitted to `residuals` by
     Levenberg-Marquardt: (parameters, the reference rotation's largest standard deviation in radians), or
-    None when the fit fails."""
-    args = (ref_marker, keys, marker_scale, desk_scale)
+    None when the fit fails. Twice: the second time each key's desk points count by that key's own residual
+    after the first (a frame whose points are noisier than `desk_scale` says, from a coarser JPEG or a
+    faster hand, and often off by a pattern of their own, counts for less)."""
     rows = _row_keys(keys)
-    fun = lambda q: residuals(q, *args)   # noqa: E731
+    n = len(keys.world)
+    scale = np.full((len(keys.xr), 1), float(desk_scale))
+    r = None
+    for first in (True, False):
+        r = _solve(lambda q: residuals(q, ref_marker, keys, marker_scale, scale), start if r is None else r.x,
+                   rows, max_nfev)
+        if r is None:
+            return None
+        if first:
+            d2 = (r.fun[8 + 8 * n:].reshape(-1, 2) ** 2).sum(axis=1)
+            rms = np.sqrt(np.bincount(keys.key, d2, n) / np.maximum(2 * np.bincount(keys.key, minlength=n), 1))
+            scale = scale / np.maximum(rms, 1.0)[keys.key][:, None]
     try:
-        r = least_squares(fun, start, jac=lambda q: jacobian(fun, q, rows), method="lm", x_scale="jac",
-                          max_nfev=max_nfev)
         cov = np.linalg.inv(r.jac.T @ r.jac)
-    except (ValueError, np.linalg.LinAlgError):
+    except np.linalg.LinAlgError:
         return None
     return r.x, float(np.sqrt(max(np.linalg.eigvalsh(cov[:3, :3]).max(), 0.0)))

@@ -12,7 +12,8 @@ from tracking.synth.trajectory import look_at
 # marker at ~0.7 m, the camera held by hand 2-6 degrees off the marker's normal (a person at the desk's near
 # side looking down at it), drifting a centimetre or two between keys, with a hand's tremor and webcam effects.
 # Rendered on demand and cached (tests/scenes.py `held_recording_folder`), not bundled. Tuning ones (scene
-# 341-342, desk 441-442) may be looked at; the test one (scene 141, desk 241) is only measured.
+# 341-342 and 353-355, desk 441-442 and 453-455) may be looked at; the test one (scene 141, desk 241) is only
+# measured.
 def _headon_keys(seed: int, duration: float, distance: float) -> list[dict]:
     """Camera keys over `duration` s: the eye 5-8 cm toward the desk's near side and up to 2 cm sideways of
     the marker (at the origin), `distance` m above the desk (+-2 cm), looking at a point within 2 cm of the
@@ -60,6 +61,10 @@ HEADON: dict[str, dict] = {
                              length=0.032, distance=0.68),
     "tune_headon_c": _headon("tune_headon_c", 353, 453, 30, hfov_deg=61, dist=[-0.068, 0.032, -0.0002, -0.0002, 0.0],
                              length=0.031, distance=0.69),
+    "tune_headon_d": _headon("tune_headon_d", 354, 454, 3, hfov_deg=63, dist=[-0.062, 0.028, 0.0003, 0.0001, 0.0],
+                             length=0.029, distance=0.72),
+    "tune_headon_e": _headon("tune_headon_e", 355, 455, 42, hfov_deg=59, dist=[-0.072, 0.036, -0.0001, 0.0003, 0.0],
+                             length=0.031, distance=0.70),
     "test_headon": _headon("test_headon", 141, 241, 14, hfov_deg=61, dist=[-0.065, 0.03, 0.0002, 0.0004, 0.0],
                            distance=0.71),
 }
