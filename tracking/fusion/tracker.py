@@ -369,8 +369,12 @@ class Tracker:
             return self._finish(fit.pose if fit.out_pose is None else fit.out_pose, pred, "marker", "anchors", None,
                                 markers, fit.inliers, precise=precise(ar))
         self.map.count_matches(fit.visible, fit.point_ids)
-        self.keyframes.consider(frame.index, frame.t, fit.pose, feats, fit.point_ids, fit.feature_idx, corners_w,
-                                corners_uv, fit.state, fit.points, fit.inliers)
+        if ar is None or not ar.ambiguous:
+            # (not while a lone head-on marker's tilt is undecided: the map's points would be triangulated
+            # from a pose up to 20 degrees off, and once the desk decides, that map pulls the joint fit,
+            # and with it the motion model, back to the wrong tilt until the anchors' pose reads as a jump)
+            self.keyframes.consider(frame.index, frame.t, fit.pose, feats, fit.point_ids, fit.feature_idx,
+                                    corners_w, corners_uv, fit.state, fit.points, fit.inliers)
         self.flow.start_tracks(frame.gray, feats, fit)
         return self._finish(fit.pose, pred, fit.state, fit.source, fit.out_pose, markers, fit.inliers,
                             precise=fit.precise)
@@ -382,7 +386,10 @@ class Tracker:
         st, t = self.status, self.frame.t
         anchor_pose = np.asarray(ar.raw_world_from_camera, float)
         init = anchor_pose
-        if pred is not None and st.lost == 0 and not self.handover.plausible(anchor_pose, pred, t):
+        # (a lone head-on marker's pose from the desk around it, `ar.desk`, holds the tilt its four corners
+        # cannot: it is the start even where it jumps from the motion, which followed the marker's own guess
+        # of the tilt until the desk decided; from the motion the corners alone keep the wrong tilt)
+        if pred is not None and st.lost == 0 and not ar.desk and not self.handover.plausible(anchor_pose, pred, t):
             init = pred
         elif len(feats):
             _, X, D = arrays
