@@ -96,6 +96,17 @@ class PoseFits:
         cfg = self.config
         ids, X, D = arrays
         pi, fi = self.match(init, X, D, feats, cfg.radius)
+        if getattr(ar, "desk", False):
+            # a lone head-on marker whose tilt the desk around it decided (tracking.anchors.desk): its four
+            # corners fit the other tilt as well, and the map (the same desk's points) pulled the joint fit
+            # there now and then (9 degrees off, then shown as the anchors' pose read as a jump from it): the
+            # desk's pose is the frame's, the map's points are only classified under it
+            nc = len(corners_w)
+            _, inl, _ = refine_pose(self.K, anchor_pose, np.concatenate([corners_w, X[pi]]),
+                                    np.concatenate([corners_uv, feats.und[fi]]), iterations=0)
+            source, out_pose, exact = self._shown(ar, inl[nc:], corners_w, t, lost)
+            return Fit(anchor_pose, "marker", int(inl.sum()), ids[pi[inl[nc:]]], fi[inl[nc:]], X[pi[inl[nc:]]],
+                       ids[pi], source, out_pose, exact)
         share = 0.8 if young else cfg.corner_share   # a young map must not pull the markers
         p, cin, min_, _ = fuse_pose(self.K, init, corners_w, corners_uv, X[pi], feats.und[fi], cfg.corner_weight,
                                     corner_share=share)
