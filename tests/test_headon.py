@@ -3,10 +3,10 @@
 Recording: tracking.synth.presets.HEADON `test_headon` (a 3 cm marker at ~0.7 m on a textured desk, the camera
 held by hand 4-7 degrees off the marker's normal, webcam effects), rendered on first use and cached in
 the recordings cache, .cache/recordings/ (tests/scenes.py `held_recording`). It was made from fresh seeds and never looked at while
-choosing the desk's parameters (those were chosen on tune_headon, tune_headon_b and tune_headon_c). Ground truth: the
-camera pose per frame from the generator, an oracle independent of the tracker. The goals (rotation error
-<= 2 degrees after the first second, jitter <= half of plain OpenCV's) are asserted as the issue states them;
-the position error is asserted near what is measured (1.5 % of the distance: the goal of 1 % is not met).
+choosing the desk's parameters (those were chosen on tune_headon and tune_headon_b to tune_headon_e). Ground truth:
+the camera pose per frame from the generator, an oracle independent of the tracker. The goals (rotation error
+<= 2 degrees after the first second, position error <= 1 % of the distance, jitter <= half of plain OpenCV's)
+are asserted as the issue states them.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from scenes import held_recording
+from scenes import held_recording, run_tracker
 from tracking.anchors import AnchorTracker
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
@@ -51,9 +51,26 @@ def test_the_desk_settles_the_tilt_of_a_head_on_marker(headon, runs):
     # the recording shows the ambiguity: the marker's own pose flips or tilts by degrees, plain OpenCV's too
     assert marker["rot_late_max"] > 5.0 and plain["rot_late_max"] > 5.0
     assert desk["tracked"] == 1.0
-    assert desk["rot_late_max"] <= 2.0          # issue 25.4's goal (measured 1.04)
-    assert desk["pos_fraction"] <= 0.018        # measured 1.54 % (the goal, 1 %, is not met)
+    assert desk["rot_late_max"] <= 2.0          # issue 25.4's goal (measured 0.29)
+    assert desk["pos_fraction"] <= 0.01         # issue 25.4's goal (measured 0.49 %)
     assert desk["jitter_m"] <= 0.5 * plain["jitter_m"]
+
+
+def test_the_full_tracker_keeps_the_desks_tilt(headon):
+    """The full tracker (the anchors with the keypoint map, tracking.fusion) on the same recording: the map
+    around a lone head-on marker holds the same desk the judge uses, and must not pull the decided pose back
+    to the other tilt (with the desk's pose merely starting the joint fit of the corners and the map, the
+    output here went 9-12 degrees off for stretches of the last two seconds: tracking.fusion.fits)."""
+    from bench_slam import headon_errors
+    from tracking.fusion import Tracker
+
+    frames, session = headon
+    with Tracker(session.camera, session.anchors) as tr:
+        r = run_tracker(tr, frames)
+    e = headon_errors(frames, r["poses"])
+    assert e["tracked"] == 1.0
+    assert e["rot_late_max"] <= 2.0      # measured 0.29
+    assert e["pos_fraction"] <= 0.01     # measured 0.49 %
 
 
 def test_undecided_at_first_decided_later(runs):
