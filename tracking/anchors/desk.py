@@ -264,21 +264,9 @@ class DeskPlane:
         xr, xc = xr[inl], xc[inl]
         marker_c = (np.asarray(world, float), self._normalised(img))
         self._frames += 1
-        fits = []
-        if not self.decided or (not self._bundled and self._frames % self.free_every == 0):
-            # the joint fit with the reference pose free (every `free_every` frames once decided, until the
-            # kept frames' bundle takes the reference over: it only improves as the camera moves further)
-            fits = [f for f in (self._fit(s, marker_c, xr, xc) for s in self._starts(branches)) if f is not None]
-            fits.sort(key=lambda f: f[1])
-        if not fits and self._ref_best is None:
+        best = self._free(branches, marker_c, xr, xc)
+        if best is None and self._ref_best is None:
             return None
-        best = fits[0] if fits else None
-        if best is not None:
-            self._judge(fits)
-            if best[3] < self._ref_sigma:
-                self._ref_best, self._ref_sigma = best[0][:6].copy(), best[3]
-            if self._excluded:
-                self._refine(xr, xc, marker_c, best[0][6:])
         start = best[0][6:] if self._last is None else self._last
         held = self._fit(start, marker_c, xr, xc, fixed_ref=self._ref_best)
         if held is None:
@@ -296,6 +284,25 @@ class DeskPlane:
         sigma = float(np.hypot(held[2], self._ref_sigma))
         self.decided = self.decided or (self._excluded and sigma < self.decide)
         return DeskFit(_pose(held[0]), sigma, self.decided, int(len(xr)), float(held[2]))
+
+    def _free(self, branches: list[np.ndarray], marker_c, xr: np.ndarray, xc: np.ndarray) -> tuple | None:
+        """The joint fit with the reference pose free (`_fit`, from each of `_starts`), the best of them or None:
+        every frame until decided, then every `free_every` frames until the kept frames' bundle takes the
+        reference over (it only improves as the camera moves further). It judges the other minimum, keeps
+        the best-determined reference, and adds this frame to the bundle once the other minimum is out."""
+        if self.decided and (self._bundled or self._frames % self.free_every != 0):
+            return None
+        fits = [f for f in (self._fit(s, marker_c, xr, xc) for s in self._starts(branches)) if f is not None]
+        if not fits:
+            return None
+        fits.sort(key=lambda f: f[1])
+        best = fits[0]
+        self._judge(fits)
+        if best[3] < self._ref_sigma:
+            self._ref_best, self._ref_sigma = best[0][:6].copy(), best[3]
+        if self._excluded:
+            self._refine(xr, xc, marker_c, best[0][6:])
+        return best
 
     def _judge(self, fits: list[tuple]) -> None:
         """Whether the other minimum is excluded, from this frame's joint fits (best first)."""
