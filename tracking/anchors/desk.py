@@ -75,8 +75,10 @@ class DeskPlane:
     the other minimum must fit to be excluded; rigid_sigmas: the marker's corners off by more than this
     (RMS, in `marker_px`) from this frame's fit with the reference held, and the marker is taken to move
     against the desk (`loose`: the desk is not followed until `reset`; the tuning head-on recordings reach
-    0.3 px, a card waved before a wall, tune_held_marker, 0.7 px a quarter second in). `max_keys`: frames kept for the reference's bundle (0: none,
-    the best single pair's reference is kept)."""
+    0.3 px, a card waved before a wall, tune_held_marker, 0.7 px a quarter second in). `max_keys`: frames
+    kept for the reference's bundle (0: none, the best single pair's reference is kept); `refine_gap`: frames
+    between bundles once `max_keys` are kept (run every `free_every` frames the bundle took a third of the
+    desk's time; the tuning recordings' figures moved within their noise from one to the other)."""
 
     def __init__(self, camera: Camera, max_points: int = 250, min_points: int = 40, marker_px: float = 0.3,
                  desk_px: float = 0.1, decide_deg: float = 1.0, exclude_chi2: float = 25.0,
@@ -90,6 +92,7 @@ class DeskPlane:
         self.f = float(np.sqrt(camera.fx * camera.fy))
         self.free_every = 5
         self.max_keys = 6
+        self.refine_gap = 15
         self.reset()
 
     def reset(self) -> None:
@@ -144,7 +147,7 @@ class DeskPlane:
         self._ref_best = None if ref is None else _params(ref)
         self._ref_sigma = ref_sigma if ref is not None else np.inf
         self._seeded = len(pts)
-        self._keys, self._bundled = [], False
+        self._keys, self._bundled, self._refined_at = [], False, 0
 
     def _follow(self, gray: np.ndarray, t: float) -> np.ndarray:
         """The desk points followed into `gray` (forward-backward checked, then matched again against the
@@ -322,8 +325,12 @@ class DeskPlane:
         all of them at once (desk_bundle.refine): the tilt from one pair of frames is as noisy as that pair's
         flow, from several pairs spread over the camera's path it averages. Taken once it is better
         determined than the best single pair's."""
+        full = len(self._keys) >= self.max_keys
+        if full and self._frames - self._refined_at < self.refine_gap:
+            return
         if self.max_keys <= 0 or not self._keep(xr, xc, marker_c, pose) or len(self._keys) < 2:
             return
+        self._refined_at = self._frames
         start = np.concatenate([self._ref_best] + [k[3] for k in self._keys])
         out = refine(start, self._ref_marker, Keys.pack([k[:3] for k in self._keys]), self.f / self.marker_px,
                      self.f / self.desk_px)
