@@ -17,11 +17,16 @@ PRUSALINK := .venv-prusalink
 PRUSALINK_STAMP := $(PRUSALINK)/.installed
 SERVER_STAMPS := $(OCTO_STAMP) $(MOON_STAMP) $(KLIPPY_STAMP) $(PRUSALINK_STAMP)
 
-# `make test` runs the suite in TEST_WORKERS processes (pytest-xdist); --dist loadfile keeps each test file on
-# one worker, so its module fixtures are built once, and the files of one real printer server together, so it
-# starts once (tests/conftest.py SERVER_GROUPS, its scheduler); the groups go out longest first (FILE_SECONDS there;
+# `make test` runs the suite in TEST_WORKERS processes (pytest-xdist): two per core of CI's 2-core machine, as a
+# third of the suite's time waits on printer servers, serial links and GUI event loops rather than computing
+# (measured on this 2-core machine: 4 min 32 s with 2 workers, 3 min 28 s with 3, 3 min 13 s with 4; with 6 the
+# real PrusaLink stopped answering in time). --dist loadfile keeps each test file on one worker, so its module
+# fixtures are built once, and the files of one real printer server together, so it starts once
+# (tests/conftest.py SERVER_GROUPS, its scheduler); the groups go out longest first (FILE_SECONDS there;
 # --no-loadscope-reorder keeps that order). 0: one process.
-TEST_WORKERS ?= 2
+TEST_WORKERS ?= 4
+# processes rendering the recordings cache at once (computing only: one per core)
+RENDER_JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 
 export PYOPENGL_PLATFORM ?= egl
 export QT_QPA_PLATFORM ?= offscreen
@@ -73,6 +78,9 @@ $(PRUSALINK_STAMP): requirements-prusalink-server.txt scripts/system-deps.sh
 demo: $(STAMP)
 	$(ARAPP) demo --out out/demo
 
+# (bytecode written: without it every worker and every program a test starts compiles arapp again, and pytest
+# rewrites every test file's asserts again, seconds of CPU each; an environment may turn it off)
+test: export PYTHONDONTWRITEBYTECODE =
 test: $(STAMP) $(SERVER_STAMPS) recordings
 	$(VENV)/bin/lint-imports --no-cache && $(PY) -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --no-loadscope-reorder tests
 
@@ -81,8 +89,8 @@ test: $(STAMP) $(SERVER_STAMPS) recordings
 # (tests/scene_book.py); a few seconds when they are there. Part of the set-up; tests and benchmarks would
 # render a missing one on first use.
 recordings: $(STAMP)
-	$(ARAPP) synth all --cached --jobs $(or $(filter-out 0,$(TEST_WORKERS)),1) >/dev/null
-	$(PY) tests/scene_book.py --jobs $(or $(filter-out 0,$(TEST_WORKERS)),1)
+	$(ARAPP) synth all --cached --jobs $(RENDER_JOBS) >/dev/null
+	$(PY) tests/scene_book.py --jobs $(RENDER_JOBS)
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py --out BENCHMARKS.md $(if $(ONLY),--only $(ONLY) --merge)
