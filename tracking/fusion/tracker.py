@@ -8,50 +8,31 @@ Poses are `world_from_camera` 4x4 in the first anchor's frame (metres, OpenCV
 camera axes). States: `marker` (anchors measured this frame and used),
 `slam` (pose from map keypoints only), `lost` (no pose).
 
-While the anchors were measured on the last frame, each frame first asks the
-anchor tracker (which re-finds the markers / QR corners where its prediction
-puts them, cheaper than a detector pass): if it measures them, its pose is the
-frame's pose, and keypoint work (ORB, map matching, keyframes) runs only every
-`keypoint_every`-th frame to keep the map growing for when the anchors go.
-Otherwise: markers are detected on a worker thread (every frame while lost or
-while the map is young, else every `marker_every`-th frame) while ORB features
-are extracted; map points are matched by projection from a constant-velocity
-prediction; the pose is a robust joint fit of marker corners and map points
-(anchors dominate), or of map points alone, or comes from relocalisation. When
-all of that fails on a frame that follows a tracked one (motion blur smears
-markers and descriptors alike), keypoints are followed from the last frame by
-optical flow (`tracking.slam.flow`) and carry the pose (while a pan keeps the markers smeared past
-reading, the flow frames after a detection pass that read none of them skip theirs: `SmearGate`,
-`smear_skip`). Under fast motion the flow
-also checks the anchors for smear; when the motion model predicts it, it runs on
-this thread while the anchors are measured on the worker (OpenCV releases the
-interpreter; the results are those of running one after the other), and its
-points are followed on from frame to frame while the anchors carry the pose
-(plane seeds placed again from the anchors' pose) instead of being seeded anew.
-When a board (12+ corners) returns after frames carried by the map or flow, the
-output fades onto it over `precise_blend_frames`, fewer than other seams take.
-New keyframes go to
-the mapping thread (triangulation, culling, local bundle adjustment with anchor
-corners as constraints); `process` never waits for it. Offline drivers, which
-feed frames faster than a camera would, call `catch_up()` between frames so the
-map keeps the pace it would have live, whatever the machine's load.
+While the anchors were measured on the last frame, each frame first asks the anchor tracker (which re-finds
+the markers / QR corners where its prediction puts them, cheaper than a detector pass): if it measures them,
+its pose is the frame's pose, and keypoint work (ORB, map matching, keyframes) runs only every
+`keypoint_every`-th frame to keep the map growing for when the anchors go. Otherwise: markers are detected on
+a worker thread (every frame while lost or while the map is young, else every `marker_every`-th frame) while
+ORB features are extracted; map points are matched by projection from a constant-velocity prediction; the
+pose is a robust joint fit of marker corners and map points (anchors dominate), or of map points alone, or
+comes from relocalisation. When all of that fails on a frame that follows a tracked one (motion blur smears
+markers and descriptors alike), keypoints are followed from the last frame by optical flow
+(`tracking.slam.flow`) and carry the pose (while a pan keeps the markers smeared past reading, the flow
+frames after a detection pass that read none of them skip theirs: `SmearGate`, `smear_skip`). Under fast
+motion the flow also checks the anchors for smear; when the motion model predicts it, it runs on this thread
+while the anchors are measured on the worker (OpenCV releases the interpreter; the results are those of
+running one after the other), and its points are followed on from frame to frame while the anchors carry the
+pose (plane seeds placed again from the anchors' pose) instead of being seeded anew. When a board (12+
+corners) returns after frames carried by the map or flow, the output fades onto it over
+`precise_blend_frames`, fewer than other seams take. New keyframes go to the mapping thread (triangulation,
+culling, local bundle adjustment with anchor corners as constraints); `process` never waits for it. Offline
+drivers, which feed frames faster than a camera would, call `catch_up()` between frames so the map keeps the
+pace it would have live, whatever the machine's load.
 
-Anchors that move in the room (a card held up to a webcam, `anchors_moving`): on keypoint frames the
-background (ORB features off the anchors between two checked frames, and the map's points off them) is
-tested against the anchors' poses (`tracking.slam.anchor_motion`; a lone marker's corners against a still
-background, in pixels); once it disagrees, the map is dropped and no longer built, only flow on points of
-the anchors' own plane within their outline carries unreadable frames, a lone marker read again after a
-swing starts the pose even smeared, and a frame nothing on the anchors carries is lost. A first
-disagreement is confirmed or forgotten within a few frames: until then every frame the anchors are read on
-is checked, and one they are not read on is carried by flow only (on the anchors' points, or the usual flow
-when the two agree), else lost: a card drifting only half a second before a swing is noticed before it.
-
-Anchor measurements that must not move the model: a lone marker whose white
-margin is partly covered (a hand reaching in, `anchors.occlusion`) is not shown
-as it is; the map, else flow, carries the pose, else the anchors' filter with
-the measurement weighted little. An anchor never seen before in the session
-that lands far from where the motion model puts the camera (a look-alike
-pattern) is left out while anything else holds the pose (`TrackerConfig`).
+Anchors that move in the room (a card held up to a webcam: `tracking.fusion.moving`): the map is dropped,
+and only flow on points of the anchors' plane carries unreadable frames, else they are lost. Anchor
+measurements that must not move the model (a hand over a lone marker's margin, a look-alike pattern far from
+the prediction): `anchors.occlusion`, `TrackerConfig`; the map, else flow, carries the pose meanwhile.
 """
 
 from __future__ import annotations
