@@ -30,7 +30,7 @@ import numpy as np
 
 from tracking.camera import Camera
 from tracking.poses import invert
-from tracking.slam.frame_pose import position_spread, refine_pose
+from tracking.pose_fit import position_spread, refine_pose
 
 _LK = dict(winSize=(15, 15), maxLevel=2, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01))
 _CROP_PX = 40   # pixels of image kept around the points for the flow: its window and pyramid need ~30
