@@ -44,8 +44,9 @@ def suite(workers: int, bytecode: bool, files: list[str]) -> dict:
     run = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True)
     wall = time.perf_counter() - t0
     lines = [ln for ln in run.stdout.splitlines() if re.search(r"\d+ (passed|failed)", ln)]
-    return {"wall": wall, "summary": lines[-1].strip("= ") if lines else f"exit {run.returncode}",
-            "ok": run.returncode == 0}
+    failed = [ln.split()[1] for ln in run.stdout.splitlines() if ln.startswith(("FAILED ", "ERROR "))]
+    summary = lines[-1].strip("= ") if lines else f"exit {run.returncode}"
+    return {"wall": wall, "summary": summary + "".join(f"; {f}" for f in failed), "ok": run.returncode == 0}
 
 
 def _load() -> str:
