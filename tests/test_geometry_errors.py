@@ -73,3 +73,17 @@ def test_parameters_outside_the_domain():
         s.normal(3.0, 2.5)
     with pytest.raises(GeometryError):
         s.tessellate(count=1)
+
+
+def test_a_file_that_is_no_model_is_named_as_such(tmp_path):
+    """A video (or any file neither a JSON model nor a mesh) handed where a model goes: one line naming the
+    file and the kinds that are models, not a JSON parse error."""
+    from arapp.geometry.model import ModelError, load_model
+
+    clip = tmp_path / "clip.mp4"
+    clip.write_bytes(b"\x00\x00\x00\x18ftypmp42")
+    with pytest.raises(ModelError) as info:
+        load_model(clip)
+    text = str(info.value)
+    assert str(clip) in text and "not a model file (.mp4)" in text and ".json" in text and ".stl" in text
+    assert "\n" not in text

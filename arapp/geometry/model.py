@@ -162,6 +162,9 @@ def load_model(path) -> Model:
         raise ModelError(str(path), "no such file")
     if path.suffix.lower() in MESH_SUFFIXES:
         return _load_mesh(path)
+    if path.suffix.lower() != ".json":
+        raise ModelError(str(path), f"not a model file ({path.suffix or 'no extension'}); give a NURBS model "
+                                    f"(.json, models/README.md) or a mesh ({', '.join(MESH_SUFFIXES)})")
     data = read_json(path, "model", lambda message: ModelError("", message), expect=None)
     try:
         model = model_from_dict(data, default_name=path.stem)
