@@ -20,6 +20,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+_GAIN_CELL = 16   # pixels: the gain field's cells (gain_matched)
 _LK = dict(winSize=(15, 15), maxLevel=0, criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01))
 
 
@@ -45,11 +46,21 @@ def match_to_reference(ref_gray: np.ndarray, ref_px: np.ndarray, gray: np.ndarra
     H, _ = cv2.findHomography(ref_px[ok], guess[ok], 0)
     if H is None:
         return guess, ok
+    # only the part of the frame around the points is warped and matched (a frame's worth every frame cost
+    # milliseconds): their box grown by the matching window and a margin for the gain field's cells
     h, w = gray.shape
-    warped = cv2.warpPerspective(ref_gray, H, (w, h), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    warped = gain_matched(warped, gray)
-    q = cv2.perspectiveTransform(ref_px.reshape(-1, 1, 2).astype(np.float64), H).reshape(-1, 2).astype(np.float32)
-    found, st, _ = cv2.calcOpticalFlowPyrLK(warped, gray, q, guess.astype(np.float32).copy(),
+    pad = _LK["winSize"][0] + _GAIN_CELL
+    x0, y0 = np.maximum(np.floor(guess[ok].min(axis=0)).astype(int) - pad, 0)
+    x1, y1 = np.minimum(np.ceil(guess[ok].max(axis=0)).astype(int) + pad + 1, (w, h))
+    shift = np.array([[1.0, 0.0, -x0], [0.0, 1.0, -y0], [0.0, 0.0, 1.0]]) @ H
+    crop = np.ascontiguousarray(gray[y0:y1, x0:x1])
+    warped = cv2.warpPerspective(ref_gray, shift, (x1 - x0, y1 - y0), flags=cv2.INTER_LINEAR,
+                                 borderMode=cv2.BORDER_REPLICATE)
+    warped = gain_matched(warped, crop, _GAIN_CELL)
+    offset = np.array([x0, y0], np.float32)
+    q = cv2.perspectiveTransform(ref_px.reshape(-1, 1, 2).astype(np.float64), shift).reshape(-1, 2).astype(np.float32)
+    found, st, _ = cv2.calcOpticalFlowPyrLK(warped, crop, q, (guess - offset).astype(np.float32),
                                             flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **_LK)
+    found = found + offset
     ok = ok & (st.ravel() == 1) & (np.linalg.norm(found - guess, axis=1) < max_move)
     return found, ok
