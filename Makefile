@@ -17,14 +17,15 @@ PRUSALINK := .venv-prusalink
 PRUSALINK_STAMP := $(PRUSALINK)/.installed
 SERVER_STAMPS := $(OCTO_STAMP) $(MOON_STAMP) $(KLIPPY_STAMP) $(PRUSALINK_STAMP)
 
-# `make test` runs the suite in TEST_WORKERS processes (pytest-xdist): two per core of CI's 2-core machine, as a
-# third of the suite's time waits on printer servers, serial links and GUI event loops rather than computing
-# (measured on this 2-core machine: 4 min 32 s with 2 workers, 3 min 28 s with 3, 3 min 13 s with 4; with 6 the
-# real PrusaLink stopped answering in time). --dist loadfile keeps each test file on one worker, so its module
+# `make test` runs the suite in TEST_WORKERS processes (pytest-xdist): three on CI's 2-core machine, as a third
+# of the suite's time waits on printer servers, serial links and GUI event loops rather than computing (measured
+# on this 2-core machine: 4 min 32 s with 2 workers, 3 min 28 s with 3, 3 min 13 s with 4; with 6 the real
+# PrusaLink stopped answering in time, and with 4 beside other load a serial-link test with 2 s windows once
+# stopped on a resend it took for garbled: 3 leaves the timing tests more room). --dist loadfile keeps each test file on one worker, so its module
 # fixtures are built once, and the files of one real printer server together, so it starts once
 # (tests/conftest.py SERVER_GROUPS, its scheduler); the groups go out longest first (FILE_SECONDS there;
 # --no-loadscope-reorder keeps that order). 0: one process.
-TEST_WORKERS ?= 4
+TEST_WORKERS ?= 3
 # processes rendering the recordings cache at once (computing only: one per core)
 RENDER_JOBS ?= $(shell nproc 2>/dev/null || echo 2)
 

@@ -70,7 +70,7 @@ def run(quick: bool = False) -> str:
         "## Test suite (`make test` after set-up)",
         "",
         f"The whole suite{' (quick: ' + ', '.join(QUICK_FILES) + ')' if quick else ''} as `make test` runs it "
-        f"once `make setup` is done: pytest-xdist, {workers} workers (two per core: a third of the suite waits on "
+        f"once `make setup` is done: pytest-xdist, {workers} workers (more than cores: a third of the suite waits on "
         "printer servers, serial links and GUI event loops rather than computing), `--dist loadfile` with the "
         "files of one real printer server on one worker (tests/conftest.py), longest files first, bytecode "
         "written. Peer: the same tests as they ran before issue 29's last step, 2 workers (one per core) and no "
