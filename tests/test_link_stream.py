@@ -6,6 +6,9 @@ are built by hand (`N<n> <cmd>*<xor>`), times are given explicitly.
 
 from __future__ import annotations
 
+import random
+from collections import deque
+
 import pytest
 
 from arapp.printing.link import protocol as P
@@ -736,3 +739,108 @@ def test_a_request_for_a_line_already_being_resent_is_ignored():
     assert s.on_ok(2.3) is Step.CONFIRMED and s.confirmed == 3  # 3 ran, once
     assert s.frames_to_send(2.3) == [framed(4, "M105")]  # the poke's number, in its turn
     assert s.epoch == 1
+
+
+
+class _Firmware:
+    """Marlin's line rules, written here from docs/domain.md §4: N must be the last line + 1, else `Error:` +
+    `Resend:` + `ok`; a line in `damage` arrives damaged once (checksum error, asked for again); a line in
+    `missing` is answered by `Error:` alone once (OctoPrint's VirtualPrinter's missing line number).
+    M105 is answered `ok T:...`."""
+
+    def __init__(self, damage=(), missing=()):
+        self.last, self.executed, self.damage, self.missing = 0, [], set(damage), set(missing)
+
+    def receive(self, frame: bytes) -> list[str]:
+        body = frame.decode().split("*")[0]
+        number, command = int(body.split()[0][1:]), body.split(None, 1)[1]
+        if number != self.last + 1:
+            return [f"Error:Line Number is not Last Line Number+1, Last Line: {self.last}",
+                    f"Resend: {self.last + 1}", "ok"]
+        if number in self.damage:
+            self.damage.discard(number)
+            return [f"Error:checksum mismatch, Last Line: {self.last}", f"Resend: {self.last + 1}", "ok"]
+        if number in self.missing:
+            self.missing.discard(number)
+            return [f"Error:No Line Number with checksum, Last Line: {self.last}"]
+        self.last = number
+        self.executed.append(command)
+        return ["ok T:20.0 /0.0 B:20.0 /0.0" if command == "M105" else "ok"]
+
+
+def _reply(s: LineStream, line: str, now: float):
+    s.on_line(now)
+    if line.startswith("ok"):
+        return s.on_ok(now, temperatures="T:" in line)
+    if line.startswith("Resend:"):
+        return s.on_resend(int(line.split(":")[1]), now)
+    return s.on_error(now)
+
+
+def _stream_against(fw: _Firmware, s: LineStream, rng: random.Random) -> Stop | None:
+    """Run `s` against `fw`, the host reading each reply line late now and then (0.3 to 3 s: its
+    reader thread not scheduled on a loaded machine); the serial line keeps the lines' order."""
+    now, pending, last_at = 0.0, deque(), 0.0
+    for _ in range(20000):
+        for frame in s.frames_to_send(now):
+            for line in fw.receive(frame):
+                late = rng.choice([0.3, 0.9, 1.1, 2.1, 3.0]) if rng.random() < 0.3 else 0.0
+                last_at = max(last_at, now + 0.001 + late)
+                pending.append((last_at, line))
+        if s.finished():
+            return None
+        if pending and pending[0][0] <= now:
+            step = _reply(s, pending.popleft()[1], now)
+            if isinstance(step, Stop):
+                return step
+            continue
+        now = max(now, min(t for t in (pending[0][0] if pending else None, s.deadline()) if t is not None))
+        if not (pending and pending[0][0] <= now):
+            step = s.on_timeout(now)
+            if isinstance(step, Stop):
+                return step
+    raise AssertionError("the stream neither finished nor stopped")
+
+
+@pytest.mark.parametrize("window", [1, 2, 4, 6])
+def test_replies_read_late_never_shift_what_is_confirmed(window):
+    """Damaged lines, `Error:`-only answers and replies read up to 3 s late (the host's reader
+    starved on a loaded machine; the short error wait then runs out before a `Resend:` is read):
+    every program line runs once, in order, and the host confirms exactly what the firmware took,
+    never a line it refused (which stops the print as a garbled resend, or confirms a line never run)."""
+    texts = [f"G1 X{i}" for i in range(1, 61)]
+    for seed in range(120):
+        rng = random.Random(seed)
+        fw = _Firmware(damage={rng.randint(2, 60) for _ in range(5)}, missing={rng.randint(2, 60) for _ in range(3)})
+        s = stream(window=window, rx_buffer=1000, timeout=2.0)
+        s.start(program_items(texts), JobState(), now=0.0)
+        assert _stream_against(fw, s, rng) is None, seed
+        assert [c for c in fw.executed if c != "M105"] == texts, seed  # every line once, in order
+        assert s.confirmed == fw.last, seed
+
+
+def test_a_second_error_before_any_resend_ends_the_first_copys_answer():
+    """`Error:` alone answers line 1 (missing line number); line 2's `Error:` + `Resend: 1` + `ok` follow
+    at once: the request and its ok are line 2's, so line 2's copy (not line 1's) is the one refused,
+    and the copies line up with the answers without waiting for a window to run out."""
+    s = stream(window=2, rx_buffer=1000, timeout=2.0)
+    s.start(program_items(["G1 X1", "G1 X2", "G1 X3"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    s.on_error(0.1)
+    s.on_error(0.1)
+    assert [c.number for c in s.inflight] == [2]
+    assert s.on_resend(1, 0.1) is Step.REWOUND and s.on_ok(0.1) is Step.IGNORED and not s.inflight
+    assert s.frames_to_send(0.1) == [framed(1, "G1 X1"), framed(2, "G1 X2")]
+
+
+def test_a_resend_read_after_the_error_wait_puts_the_copy_back():
+    """`Error:`, then (read 1.5 s later) its `Resend: 2` and `ok`: the short error wait took the copy as
+    answered; the request gives it back, so the `ok` answers it and not line 3's copy."""
+    s = stream(window=3, rx_buffer=1000, timeout=2.0)
+    s.start(program_items(["G1 X1", "G1 X2", "G1 X3"]), JobState(), now=0.0)
+    s.frames_to_send(0.0)
+    s.on_ok(0.05)
+    s.on_error(0.1)
+    assert s.on_timeout(1.1) is Step.POKE and [c.number for c in s.inflight] == [3]
+    assert s.on_resend(2, 1.6) is Step.REWOUND and s.on_ok(1.6) is Step.IGNORED
+    assert [c.number for c in s.inflight] == [3] and s.confirmed == 1 and s.next_number == 2

@@ -191,6 +191,9 @@ class LineStream:
     plain_ok_seen: bool = False  # the firmware answers other lines with a bare `ok` (see on_ok)
     absorb_oks: int = 0
     honoured: tuple | None = None  # (line, confirmed then) of the last resend request honoured
+    # The copy the short error wait took as answered by its `Error:` alone (on_timeout); its
+    # `Resend:` may still come, read late on a loaded host (on_resend puts it back).
+    error_only: Copy | None = None
     resends: int = 0
     timeouts: int = 0
     max_inflight: int = 0
@@ -202,7 +205,7 @@ class LineStream:
         self.history.clear()
         self.inflight.clear()
         self.next_number, self.top, self.confirmed = 1, 0, 0
-        self.honoured, self.absorb_oks = None, 0
+        self.honoured, self.absorb_oks, self.error_only = None, 0, None
         self.last_byte = self.last_progress = self.last_tick = now
         self.poke_due = False
 
@@ -323,6 +326,7 @@ class LineStream:
         to that M105's number was taken (Marlin takes N only after N-1).
         """
         self.error_seen_at = None
+        self.error_only = None
         self.last_byte = now
         if temperatures and self.plain_ok_seen:
             for i, copy in enumerate(self.inflight):
@@ -352,6 +356,13 @@ class LineStream:
         """`Resend: line`: the printer's last accepted line is `line - 1`."""
         after_error = self.error_seen_at is not None  # a request with its own `Error:` line is a new one
         self.error_seen_at = None
+        if self.error_only is not None and not after_error:
+            # The request that followed the `Error:` the error wait took as the whole answer, read late:
+            # the copy was answered by both, so it is in flight again (else every later `ok` would be
+            # counted for the line after the one it answers).
+            self.inflight.appendleft(self.error_only)
+            after_error = True
+        self.error_only = None
         self.last_byte = now  # alive; progress only once the line asked for is acknowledged
         self.resends += 1
         if line > self.top + 1:
@@ -391,8 +402,12 @@ class LineStream:
 
     def on_error(self, now: float) -> Step:
         """A recoverable `Error:` (checksum, line number): a resend request should follow at once."""
-        if self.inflight and self.error_seen_at is None:
-            self.error_seen_at = now
+        if self.error_seen_at is not None and self.inflight:
+            # Two `Error:` lines without a `Resend:` between them: the first was the whole answer to the
+            # oldest copy (the VirtualPrinter's missing line number); this one answers the next copy.
+            self.inflight.popleft()
+        self.error_only = None  # the request after this error has its own `Error:` line
+        self.error_seen_at = now if self.inflight else None
         return Step.NOTHING
 
     def on_wait(self, now: float) -> Step:
@@ -477,7 +492,7 @@ class LineStream:
             # An `Error:` with no `Resend:` or `ok` after it (the VirtualPrinter's missing line
             # number): that was the whole answer to the oldest copy; none follows. Not confirmed.
             if self.inflight:
-                self.inflight.popleft()
+                self.error_only = self.inflight.popleft()
         self.error_seen_at = None
         self.last_tick = now
         self.poke_due = True
