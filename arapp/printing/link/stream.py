@@ -39,6 +39,11 @@ The rules (docs/domain.md §4, issue #14):
   replays. A request is honoured once: the same request again, without an
   `Error:` line of its own, before the line was answered is a doubled reply,
   and its `ok` is absorbed.
+- An `Error:` without a `Resend:` after it (OctoPrint's VirtualPrinter's
+  missing line number) is the whole answer to the oldest copy: known when the
+  next copy's own `Error:` comes first, else after a short wait. A `Resend:`
+  read after that wait (a loaded host reads late) gives the copy back: each
+  `ok` must stay with the copy it answers, or a later one is confirmed early.
 - Never more than `window` lines (and `rx_buffer` bytes) in flight, pokes
   apart (they stop at `rx_buffer` bytes once one is in flight).
 
