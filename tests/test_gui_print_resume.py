@@ -31,12 +31,15 @@ def last_z(commands) -> float:
 
 
 def test_lost_print_is_resumed_not_restarted(qtbot, window, tmp_path, bed_profile):  # noqa: F811
+    from arapp.exchange import write_atomic
     from arapp.printing.link.job import Program
 
     dlg = sliced_dialog(qtbot, window, tmp_path, bed_profile, size_mm=10.0)
     gcode = quick(dlg.result.gcode)
     dlg.result = dataclasses.replace(dlg.result, gcode=gcode)
-    Path(dlg.job_gcode_path).write_text(gcode)  # the job file's G-code is the one printed
+    # the job file's G-code is the one printed; renamed into place as the app writes it (rewriting the
+    # file in place could be read half-written by the app's checks)
+    write_atomic(dlg.job_gcode_path, gcode.encode("utf-8"))
     program = [c.text for c in Program.from_lines(gcode.splitlines()).commands]
     cut = len(program) // 3
     fault = (program[cut], program[: cut + 1].count(program[cut]))
@@ -129,6 +132,9 @@ def test_saved_job_rules_are_the_clis(tmp_path):
     state.status = "link_lost"
     state.save(job)
     gcode.write_text(gcode.read_text() + "G1 X30 Y10 E3\n")
-    with pytest.raises(JobFileError, match="changed since the job was saved"):
+    with pytest.raises(JobFileError, match="changed since the job was saved") as refused:
         load_saved_job(job)
+    # the stop message says why there is nothing to resume, not only that there is not
+    _, text = stop_text(state, None, "the connection was lost", why_not=str(refused.value))
+    assert "Resume" not in text and "cannot be resumed (" in text and "changed since the job was saved" in text
     assert isinstance(JobState.load(job), JobState)

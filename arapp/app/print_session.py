@@ -31,6 +31,7 @@ from arapp.app.printlink import PrintEvent, start_job
 from arapp.app.runner import ImmediateRunner
 from arapp.app.saved_job import SavedJob, find_saved_job, load_saved_job, stop_text
 from arapp.engine.toolpaths import bed_from_placement_mm, preview_spec, summarize
+from arapp.exchange import write_atomic
 from arapp.geometry.placement import Placement
 from arapp.printing import SliceCancelled, placed_solid, slice_mesh
 from arapp.printing.export import drop_on_bed
@@ -72,8 +73,8 @@ def slice_job(model, placement: Placement, settings, profile, profile_name: str,
     v = np.asarray(model.mesh().vertices, float) @ np.asarray(matrix, float)[:3, :3].T + np.asarray(matrix, float)[:3, 3]
     sliced = result.mesh if getattr(result, "mesh", None) is not None and abs(result.scale - 1) < 1e-9 else solid
     bed_from_placement = bed_from_placement_mm(here.bounds, sliced.bounds, float(v[:, 2].min()))
-    job_gcode.parent.mkdir(parents=True, exist_ok=True)
-    job_gcode.write_text(result.gcode)
+    # renamed into place: the preview and a resume check read it while a later slice may be writing
+    write_atomic(job_gcode, result.gcode.encode("utf-8"))
     prune_slices(job_gcode.parent)
     summary = summarize(parse_gcode(result.gcode), profile.bed)
     return result, str(job_gcode), summary, profile, profile_name, bed_from_placement
@@ -323,15 +324,16 @@ class PrintSession:
             self.last_progress = pr
             layer_changed = pr.layer != self.current_layer
             self.current_layer = pr.layer
-        saved = None
+        saved, why_not = None, ""
         if ev.finished and ev.error and ev.job_path:
             try:
                 saved = load_saved_job(ev.job_path, self._job_profile)
-            except (ValueError, OSError):
-                saved = None  # stopped before the first move, or the file is unreadable: not resumable
+            except (ValueError, OSError) as exc:
+                # stopped before the first move, its G-code changed or is gone: not resumable, and why
+                saved, why_not = None, str(exc)
         if ev.error:
             if ev.finished and ev.job_state is not None:
-                title, message = stop_text(ev.job_state, saved, ev.error)
+                title, message = stop_text(ev.job_state, saved, ev.error, why_not)
             else:
                 title, message = ev.error_title or "Printer error", ev.error
             self.events.error.emit(title, message)

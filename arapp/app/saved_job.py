@@ -125,9 +125,10 @@ _WHY = {
 }
 
 
-def stop_text(state: JobState | None, resumable: SavedJob | None, detail: str) -> tuple[str, str]:
+def stop_text(state: JobState | None, resumable: SavedJob | None, detail: str, why_not: str = "") -> tuple[str, str]:
     """(title, message) in plain words for a print that stopped with `state` (the link's job state);
-    `resumable` when it can be resumed; `detail`: the link's own wording, kept last."""
+    `resumable` when it can be resumed, else `why_not` (why its saved job cannot be); `detail`: the
+    link's own wording, kept last."""
     status = getattr(state, "status", "failed")
     title, why = _WHY.get(status, _WHY["failed"])
     where = ""
@@ -141,7 +142,8 @@ def stop_text(state: JobState | None, resumable: SavedJob | None, detail: str) -
                      "Resume in the Print panel (it homes X and Y only and continues where the print stopped). "
                      "Print would start the whole job again.")
     elif state is not None and state.commands_done:
-        lines.append("This print cannot be resumed; clear the bed before printing again.")
+        because = f" ({why_not})" if why_not else ""
+        lines.append(f"This print cannot be resumed{because}; clear the bed before printing again.")
     if detail:
         lines.append(f"Details: {_without_cli_hint(detail)}")
     return title, "\n\n".join(lines)
