@@ -239,6 +239,12 @@ def test_cancelled_job_cannot_be_resumed(tmp_path, capsys):
 
 
 # -- 5. Ctrl-C during `arapp print` ---------------------------------------------------------------
+def _ctrl_c_as_in_a_terminal() -> None:
+    """In the child before it runs: Ctrl-C at its default, as in a terminal (a suite started in the background,
+    `cmd &` or nohup, hands its children SIGINT ignored, and Python then installs no handler for it)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_ctrl_c_cancels_cleanly(tmp_path):
     lines, expected = make_job(n=400, per_layer=100)
     gcode = write_gcode(tmp_path, lines)
@@ -247,7 +253,7 @@ def test_ctrl_c_cancels_cleanly(tmp_path):
     with MarlinPty(move_s=0.01) as emu:
         proc = subprocess.Popen([sys.executable, "-m", "arapp", "print", str(gcode), "--port", emu.port,
                                  "--timeout", "2"], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True)
+                                stderr=subprocess.PIPE, text=True, preexec_fn=_ctrl_c_as_in_a_terminal)
         deadline = time.monotonic() + 30
         while len(ran(emu)) < 60 and time.monotonic() < deadline and proc.poll() is None:
             time.sleep(0.05)

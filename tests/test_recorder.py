@@ -90,6 +90,15 @@ def test_seconds_limit_and_progress_line(rec, tmp_path):
 
 
 def test_ctrl_c_finishes_the_file_cleanly(rec, tmp_path):
+    # Ctrl-C at Python's default, as in a terminal (a suite started in the background inherits SIGINT ignored)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        _ctrl_c_during_recording(rec, tmp_path)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _ctrl_c_during_recording(rec, tmp_path):
     class Interrupting:
         """Wraps a source and sends SIGINT to this process at frame 5, like Ctrl-C."""
 
