@@ -39,6 +39,8 @@ import threading
 import time
 import tty
 
+from pty_hangup import hang_up
+
 _NUMBERED = re.compile(r"^N(-?\d+)\s*(.*?)\*(\d+)\s*$")
 _S = re.compile(r"\bS\s*(-?\d*\.?\d+)")
 
@@ -104,7 +106,7 @@ class MarlinPty:
         with self._write_lock:
             if not self.dropped.is_set():
                 self.dropped.set()
-                os.close(self._master)
+                hang_up(self._master)  # the number itself is closed by close(), once the threads are done
 
     def _reader(self) -> None:
         pending = b""
@@ -293,9 +295,8 @@ class MarlinPty:
         for t in self._threads:
             t.join(timeout=2.0)
         with self._write_lock:
-            if not self.dropped.is_set():
-                self.dropped.set()
-                os.close(self._master)
+            self.dropped.set()
+            os.close(self._master)
         for fd in (self._slave, self._stop_r, self._stop_w):
             os.close(fd)
 

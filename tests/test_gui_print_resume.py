@@ -56,7 +56,7 @@ def test_lost_print_is_resumed_not_restarted(qtbot, window, tmp_path, bed_profil
     # plain words, where it stopped, the way on; no CLI command line
     title, message = window.errors[-1]
     assert title == "The connection to the printer was lost"
-    assert "press Resume" in message and "--resume" not in message
+    assert "press Resume" in message and "--resume" not in message, message
     saved = dlg.session.saved_job
     assert saved is not None and saved.state.commands_done == cut + 1
     assert f"{100.0 * (cut + 1) / len(program):.1f} %" in message

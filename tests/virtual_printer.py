@@ -60,6 +60,8 @@ from serial import SerialTimeoutException
 from octoprint.plugins.virtual_printer import VirtualPrinterPlugin
 from octoprint.plugins.virtual_printer import virtual as _virtual
 
+from pty_hangup import hang_up
+
 _LINE_NUMBER = re.compile(rb"^N(-?\d+)")
 _NEGATIVE_M110 = re.compile(rb"^N-1 M110\b")
 
@@ -381,15 +383,12 @@ class VirtualPrinterPty:
                     return
 
     def _drop(self):
-        """The link goes away: close the master, the host sees a hang-up."""
+        """The link goes away: the master hung up, the host sees it (the number is closed by close())."""
         self.dropped.set()
-        self._close_master()
-
-    def _close_master(self):
         with self._master_lock:
             if self._master_open:
                 self._master_open = False
-                os.close(self._master)
+                hang_up(self._master)
 
     def close(self):
         if self._closed.is_set():
@@ -398,7 +397,9 @@ class VirtualPrinterPty:
         os.write(self._stop_w, b"x")
         for t in self._threads:
             t.join(timeout=2.0)
-        self._close_master()
+        with self._master_lock:
+            self._master_open = False
+            os.close(self._master)
         # Stop the printer's command loop, let its move buffer drain, then close
         # (closing while a move is running makes its buffer thread fail).
         self.printer._killed = True
