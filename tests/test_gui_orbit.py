@@ -67,20 +67,23 @@ def test_model_without_source_shows_in_the_orbit_view(qtbot, window):
     assert (seen & ~grown).sum() <= 0.002 * seen.size  # and nothing is drawn outside it
 
     # a drag turns it (a different picture, still inside the new box); the wheel zooms in
-    before = ov.orbit
+    before, pic = ov.orbit, ov.picture()
     qtbot.mousePress(ov, Qt.MouseButton.LeftButton, pos=QPoint(200, 200))
     qtbot.mouseMove(ov, QPoint(300, 230))
     qtbot.mouseRelease(ov, Qt.MouseButton.LeftButton, pos=QPoint(300, 230))
     assert ov.orbit.azimuth_deg != before.azimuth_deg and ov.orbit.elevation_deg != before.elevation_deg
+    # drawn on the view's render thread: painted when it comes
+    qtbot.waitUntil(lambda: ov.picture() is not pic, timeout=TIMEOUT_MS)
     qtbot.wait(50)
     turned = model_pixels(grab_rgb(ov))
     turned[-40:] = False
     assert (turned != seen).mean() > 0.01
     box2 = cv2.dilate(projected_box(ov, verts).astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
     assert (turned & ~box2).sum() <= 0.002 * turned.size
-    area = turned.sum()
+    area, pic = turned.sum(), ov.picture()
     ov.orbit = ov.orbit.zoomed(3)
     ov.model_changed()
+    qtbot.waitUntil(lambda: ov.picture() is not pic, timeout=TIMEOUT_MS)
     qtbot.wait(50)
     zoomed = model_pixels(grab_rgb(ov))
     zoomed[-40:] = False
@@ -107,3 +110,51 @@ def test_inset_while_the_marker_is_lost_and_gone_once_a_source_has_no_model(qtbo
     assert ov.geometry().bottom() <= view.bottom()
     qtbot.waitUntil(lambda: ov.picture() is not None, timeout=TIMEOUT_MS)
     assert model_pixels(grab_rgb(ov))[:-30].mean() > 0.03
+
+
+def test_inset_waits_out_a_moment_without_pose_and_draws_off_the_ui_thread(qtbot, monkeypatch):
+    """A frame or two without a pose (a marker lost for a moment) does not flash the inset: it shows once the
+    pose has been missing for LOST_DELAY_S, and goes at once when the pose is back. The picture is drawn on
+    the view's render thread, never on the UI thread (GL start-up there stalled the live view 30 ms)."""
+    import threading
+    import time
+    from types import SimpleNamespace
+
+    import trimesh
+    from PySide6.QtWidgets import QWidget
+
+    from arapp.gui.overlays import orbit_view as ov_mod
+    from arapp.render import OverlayRenderer
+
+    drawn_on = []
+    draw = OverlayRenderer.draw
+    monkeypatch.setattr(OverlayRenderer, "draw",
+                        lambda self, *a, **k: drawn_on.append(threading.current_thread()) or draw(self, *a, **k))
+    view = QWidget()
+    view.resize(800, 600)
+    qtbot.addWidget(view)
+    view.show()
+    posed = SimpleNamespace(result=SimpleNamespace(world_from_camera=np.eye(4)))
+    lost = SimpleNamespace(result=SimpleNamespace(world_from_camera=None))
+    session = SimpleNamespace(model=object(), mesh_lines=(trimesh.creation.box((0.05, 0.05, 0.05)), None),
+                              source_info={"name": "cam"}, engine=object(), last_shown=posed, mode="shaded")
+    ov = ov_mod.OrbitView(view, session)
+    try:
+        ov.place()
+        assert not ov.isVisible()
+        session.last_shown = lost
+        t0 = time.monotonic()
+        ov.place()
+        assert not ov.isVisible() and ov.wanted() is None  # lost just now
+        qtbot.waitUntil(ov.isVisible, timeout=TIMEOUT_MS)  # no new frame needed: its timer places it
+        assert time.monotonic() - t0 >= ov_mod.LOST_DELAY_S and ov.wanted() == "inset"
+        qtbot.waitUntil(lambda: ov.picture() is not None, timeout=TIMEOUT_MS)
+        assert drawn_on and threading.main_thread() not in drawn_on
+        session.last_shown = posed
+        ov.place()
+        assert not ov.isVisible()  # the pose is back: the inset goes at once
+        session.last_shown = lost
+        ov.place()
+        assert not ov.isVisible()  # and a new loss waits again
+    finally:
+        ov.close_renderer()

@@ -4,13 +4,19 @@ With a model loaded and no source open it fills the view (the welcome view steps
 source open and the marker lost it is an inset in the view's lower right corner, so the camera
 picture stays visible for aiming at the marker. Drag turns the virtual camera around the model,
 the wheel zooms. The pose comes from `arapp.app.orbit` (no Qt); the picture from the overlay
-renderer (arapp.render, offscreen GL) made lazily on the UI thread, only while the view is shown.
+renderer (arapp.render, offscreen GL) on the view's own render thread, made when the view is first shown:
+making a GL context and its shaders takes tens of milliseconds and each picture a few, which on the UI
+thread would stall the live view (the UI-block goal of issue 29 is under 10 ms). A marker lost for a
+moment does not flash the inset: it shows once the pose has been missing for LOST_DELAY_S.
 """
 
 from __future__ import annotations
 
+import threading
+import time
+
 import numpy as np
-from PySide6.QtCore import QEvent, QObject, QPointF, QRect, Qt
+from PySide6.QtCore import QEvent, QObject, QPointF, QRect, Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QImage, QPainter
 from PySide6.QtWidgets import QWidget
 
@@ -19,21 +25,94 @@ from arapp.app.orbit import Orbit, camera_from_model, virtual_camera
 BACKGROUND_BGR = (46, 40, 40)  # a dark grey-blue, apart from the view's near-black letter-box
 MAX_WIDTH = 960                # device pixels rendered at most across: the picture is scaled beyond
 INSET_SHARE = 0.34             # the inset's width as a share of the view's
+LOST_DELAY_S = 0.5             # the pose missing this long (seconds) before the inset shows
+
+
+class OrbitRenderThread(threading.Thread):
+    """The orbit view's render thread: it owns the overlay renderer and its GL context (a context belongs
+    to the thread that made it). `request(spec)` asks for a picture, the newest request wins;
+    `done(image, error)` is called on this thread with the RGB QImage (or None and the error's text)."""
+
+    def __init__(self, done):
+        super().__init__(name="arapp-orbit-render", daemon=True)
+        self._done = done
+        self._cond = threading.Condition()
+        self._spec: dict | None = None
+        self._stopping = False
+        self._renderer = None
+        self._size = None
+
+    def request(self, spec: dict) -> None:
+        """spec: width, height (device pixels), mesh, lines, camera_from_model (4x4), mode, color."""
+        with self._cond:
+            self._spec = spec
+            self._cond.notify()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        with self._cond:
+            self._stopping = True
+            self._cond.notify()
+        if self.is_alive() and self is not threading.current_thread():
+            self.join(timeout)
+
+    def run(self) -> None:
+        try:
+            while True:
+                with self._cond:
+                    self._cond.wait_for(lambda: self._stopping or self._spec is not None)
+                    if self._stopping:
+                        return
+                    spec, self._spec = self._spec, None
+                try:
+                    self._done(*self._draw(spec))
+                except RuntimeError:  # the view was deleted while this picture was drawn: no one to show it
+                    return
+        finally:
+            if self._renderer is not None:
+                self._renderer.close()
+
+    def _draw(self, spec: dict):
+        from arapp.render import OverlayRenderer, RendererError  # GL only once the view is needed
+
+        w, h = spec["width"], spec["height"]
+        try:
+            if self._renderer is None or self._size != (w, h):
+                if self._renderer is not None:
+                    self._renderer.close()
+                cam = virtual_camera(w, h)
+                self._renderer = OverlayRenderer(cam.K, cam.dist, w, h)
+                self._size = (w, h)
+            mode = spec["mode"]
+            bg = np.empty((h, w, 3), np.uint8)
+            bg[:] = BACKGROUND_BGR
+            out = self._renderer.draw(bg, spec["mesh"], spec["camera_from_model"], mode=mode,
+                                      lines=spec["lines"] if mode == "isolines" else None, color=spec["color"],
+                                      inplace=True)
+        except RendererError as exc:
+            return None, f"No 3D view: {exc}"
+        rgb = np.ascontiguousarray(out[:, :, ::-1])
+        return QImage(rgb.data, w, h, 3 * w, QImage.Format.Format_RGB888).copy(), None
 
 
 class OrbitView(QWidget):
-    """Child of the VideoView drawing `session`'s model from the orbit camera; `placement()` says where."""
+    """Child of the VideoView drawing `session`'s model from the orbit camera; `place()` says where."""
+
+    _rendered = Signal(object, object)  # (QImage or None, error or None), from the render thread
 
     def __init__(self, view, session):
         super().__init__(view)
         self.view, self.session = view, session
         self.orbit = Orbit()
         self.error: str | None = None
-        self._renderer = None
-        self._size = None
+        self._thread: OrbitRenderThread | None = None
         self._picture: QImage | None = None
         self._dirty = True
         self._last_pos: QPointF | None = None
+        self._lost_since: float | None = None  # time.monotonic() when the shown frames lost their pose
+        self._lost_timer = QTimer(self)  # shows the inset when the pose stays missing, frames or not
+        self._lost_timer.setSingleShot(True)
+        self._lost_timer.timeout.connect(self.place)
+        self._rendered.connect(self._picture_done)  # queued: emitted on the render thread
         self.setToolTip("The model in 3D: drag to turn it, the wheel zooms")
         view.installEventFilter(self)
         self.hide()
@@ -46,10 +125,20 @@ class OrbitView(QWidget):
             return None
         if s.source_info is None and s.engine is None:
             return "full"
-        shown = s.last_shown
-        if shown is not None and shown.result.world_from_camera is None:
-            return "inset"
-        return None
+        return "inset" if self._lost_long_enough() else None
+
+    def _lost_long_enough(self) -> bool:
+        """The frame shown has no pose, and the frames before it had none for LOST_DELAY_S."""
+        shown = self.session.last_shown
+        if shown is None or shown.result.world_from_camera is not None:
+            self._lost_since = None
+            self._lost_timer.stop()
+            return False
+        now = time.monotonic()
+        if self._lost_since is None:
+            self._lost_since = now
+            self._lost_timer.start(int(LOST_DELAY_S * 1000) + 20)
+        return now - self._lost_since >= LOST_DELAY_S
 
     def place(self) -> None:
         """Show, hide and size the view for the session's state now."""
@@ -82,45 +171,33 @@ class OrbitView(QWidget):
         self.update()
 
     # -- picture -------------------------------------------------------------------------------
-    def _render(self) -> None:
+    def _request_picture(self) -> None:
+        """Ask the render thread for the picture at the view's size (device pixels, at most MAX_WIDTH)."""
         ratio = self.devicePixelRatioF()
         w, h = int(self.width() * ratio), int(self.height() * ratio)
         if w > MAX_WIDTH:
             w, h = MAX_WIDTH, max(1, int(h * MAX_WIDTH / w))
         w, h = max(w, 16), max(h, 16)
-        from arapp.render import OverlayRenderer, RendererError  # GL only once the view is needed
+        mesh, lines = self.session.mesh_lines
+        cfm = camera_from_model(self.orbit, np.asarray(mesh.vertices), virtual_camera(w, h))
+        if self._thread is None:
+            self._thread = OrbitRenderThread(self._rendered.emit)
+            self._thread.start()
+        self._thread.request({"width": w, "height": h, "mesh": mesh, "lines": lines, "camera_from_model": cfm,
+                              "mode": self.session.mode, "color": getattr(self.session.model, "color", None)})
 
-        try:
-            if self._renderer is None or self._size != (w, h):
-                if self._renderer is not None:
-                    self._renderer.close()
-                cam = virtual_camera(w, h)
-                self._renderer = OverlayRenderer(cam.K, cam.dist, w, h)
-                self._size = (w, h)
-            mesh, lines = self.session.mesh_lines
-            cam = virtual_camera(w, h)
-            cfm = camera_from_model(self.orbit, np.asarray(mesh.vertices), cam)
-            mode = self.session.mode
-            bg = np.empty((h, w, 3), np.uint8)
-            bg[:] = BACKGROUND_BGR
-            out = self._renderer.draw(bg, mesh, cfm, mode=mode, lines=lines if mode == "isolines" else None,
-                                      color=getattr(self.session.model, "color", None), inplace=True)
-        except RendererError as exc:
-            self.error = f"No 3D view: {exc}"
-            self._picture = None
-            return
-        self.error = None
-        rgb = np.ascontiguousarray(out[:, :, ::-1])
-        self._picture = QImage(rgb.data, w, h, 3 * w, QImage.Format.Format_RGB888).copy()
+    def _picture_done(self, image: QImage | None, error: str | None) -> None:
+        self._picture, self.error = image, error
+        self.update()
 
     def picture(self) -> QImage | None:
         """The last rendered picture (RGB, device pixels), None before the first paint."""
         return self._picture
 
     def paintEvent(self, event):  # noqa: N802
-        if self._dirty or self._picture is None:
+        if self._dirty and self.session.mesh_lines is not None:
             self._dirty = False
-            self._render()
+            self._request_picture()  # painted when it comes (_picture_done); the last one meanwhile
         p = QPainter(self)
         p.fillRect(self.rect(), QColor(*BACKGROUND_BGR[::-1]))
         if self._picture is not None:
@@ -162,9 +239,10 @@ class OrbitView(QWidget):
         event.accept()
 
     def close_renderer(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        """End the render thread (its GL context goes with it)."""
+        if self._thread is not None:
+            self._thread.stop()
+            self._thread = None
 
 
 def install_orbit(window) -> OrbitView:
