@@ -1,5 +1,5 @@
 """Local bundle adjustment: keyframe poses and map points of a window, minimising robust
-reprojection error with scipy.optimize.least_squares (sparse Jacobian, Huber loss).
+reprojection error (Huber loss) by Levenberg-Marquardt on the Schur complement (tracking.slam.schur_lm).
 
 The anchors' corners seen by a keyframe enter as observations of fixed world
 points, so the map cannot drift away from the markers' frame or scale.
@@ -11,12 +11,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
-from scipy.sparse import coo_matrix
 from scipy.spatial.transform import Rotation
 
 from tracking.poses import invert
 from tracking.slam.map import Map
+from tracking.slam.schur_lm import minimise
 
 ANCHOR_WEIGHT = 2.0  # marker corners are measured to ~0.5 px: twice the weight of a 1 px keypoint
 
@@ -117,8 +116,8 @@ def _dpose(Jp: np.ndarray, Xc: np.ndarray, t: np.ndarray) -> np.ndarray:
 class _WindowModel:
     """The window's least-squares model: the parameter vector's layout (per optimised keyframe a rotation
     increment w, R = exp(w) R0, and the translation of camera_from_world; per point its world position),
-    the residuals in weighted pixels and their analytic sparse Jacobian (2 rows per observation: 6 pose + 3
-    point columns)."""
+    the residuals in weighted pixels and their analytic Jacobian by blocks (per observation 2 x 6 by its
+    keyframe's pose, 2 x 3 by its point)."""
 
     def __init__(self, problem: BAProblem, K: np.ndarray):
         pr = self.pr = problem
@@ -129,7 +128,8 @@ class _WindowModel:
         self._observation_cameras()
         self.fx, self.fy, self.cx, self.cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
         self.m_obs, self.m_anc = pr.obs_kf.size, self.a_slot.size
-        self._jacobian_pattern()
+        self.obs_pt = pr.obs_pt
+        self.oi = np.nonzero(self.opt)[0]  # the observations made by optimised keyframes
 
     def _initial_vector(self) -> np.ndarray:
         pr, nk = self.pr, self.nk
@@ -153,20 +153,6 @@ class _WindowModel:
                 self.fixed_t[j] = pr.fixed_poses[int(k)][:3, 3]
         self.slot = np.maximum(self.o_slot, 0)
 
-    def _jacobian_pattern(self) -> None:
-        """The Jacobian's (row, column) of every nonzero, in the order jacobian() lists the values."""
-        pr, nk, m_obs, m_anc, o_slot = self.pr, self.nk, self.m_obs, self.m_anc, self.o_slot
-        self.n_rows = 2 * (m_obs + m_anc)
-        r_obs = np.repeat(np.arange(2 * m_obs).reshape(m_obs, 2), 3, axis=1).reshape(m_obs, 2, 3)
-        c_pt = (6 * nk + 3 * pr.obs_pt[:, None, None] + np.arange(3)[None, None, :]).repeat(2, axis=1)
-        oi = self.oi = np.nonzero(self.opt)[0]
-        r_po = np.repeat(np.arange(2 * m_obs).reshape(m_obs, 2)[oi], 6, axis=1).reshape(oi.size, 2, 6)
-        c_po = (6 * o_slot[oi][:, None, None] + np.arange(6)[None, None, :]).repeat(2, axis=1)
-        r_an = np.repeat((2 * m_obs + np.arange(2 * m_anc)).reshape(m_anc, 2), 6, axis=1).reshape(m_anc, 2, 6)
-        c_an = (6 * self.a_slot[:, None, None] + np.arange(6)[None, None, :]).repeat(2, axis=1)
-        self.rows = np.concatenate([r_obs.ravel(), r_po.ravel(), r_an.ravel()])
-        self.cols = np.concatenate([c_pt.ravel(), c_po.ravel(), c_an.ravel()])
-
     def unpack(self, x):
         nk = self.nk
         rv = x[:6 * nk].reshape(nk, 6)
@@ -179,30 +165,49 @@ class _WindowModel:
         t = np.where(self.opt[:, None], ts[self.slot], self.fixed_t)
         return Rs, ts, P, R, t
 
-    def residuals(self, x):
+    def residual_blocks(self, x):
+        """(r_obs (m, 2), r_anc (a, 2)): weighted reprojection errors of the keypoints and anchor corners."""
         pr = self.pr
         Rs, ts, P, R, t = self.cams(x)
         Xc = np.einsum("nij,nj->ni", R, P[pr.obs_pt]) + t
         r1 = (_project(Xc, self.fx, self.fy, self.cx, self.cy) - pr.obs_uv) * pr.obs_w[:, None]
-        if self.m_anc:
-            Xa = np.einsum("nij,nj->ni", Rs[self.a_slot], pr.anc_xyz) + ts[self.a_slot]
-            r2 = (_project(Xa, self.fx, self.fy, self.cx, self.cy) - pr.anc_uv) * ANCHOR_WEIGHT
-            return np.concatenate([r1.ravel(), r2.ravel()])
-        return r1.ravel()
+        if not self.m_anc:
+            return r1, np.zeros((0, 2))
+        Xa = np.einsum("nij,nj->ni", Rs[self.a_slot], pr.anc_xyz) + ts[self.a_slot]
+        return r1, (_project(Xa, self.fx, self.fy, self.cx, self.cy) - pr.anc_uv) * ANCHOR_WEIGHT
 
-    def jacobian(self, x):
+    def residuals(self, x):
+        """Every residual as one vector (keypoints, then anchor corners)."""
+        r1, r2 = self.residual_blocks(x)
+        return np.concatenate([r1.ravel(), r2.ravel()])
+
+    def jacobian_blocks(self, x):
+        """(J_pt (m, 2, 3) by the point, J_po (len(oi), 2, 6) by the pose of the observations `oi` made by
+        optimised keyframes, J_an (a, 2, 6) of the anchor corners by their keyframe's pose): the pose
+        columns are the left rotation increment and the translation (see retract)."""
         pr, oi = self.pr, self.oi
         Rs, ts, P, R, t = self.cams(x)
         Xc = np.einsum("nij,nj->ni", R, P[pr.obs_pt]) + t
         Jp = _dproject(Xc, pr.obs_w, self.fx, self.fy)
-        J_pt = Jp @ R
-        J_po = _dpose(Jp[oi], Xc[oi], t[oi])
-        parts = [J_pt.ravel(), J_po.ravel()]
+        J_an = np.zeros((0, 2, 6))
         if self.m_anc:
             Xa = np.einsum("nij,nj->ni", Rs[self.a_slot], pr.anc_xyz) + ts[self.a_slot]
             Ja = _dproject(Xa, np.full(self.m_anc, ANCHOR_WEIGHT), self.fx, self.fy)
-            parts.append(_dpose(Ja, Xa, ts[self.a_slot]).ravel())
-        return coo_matrix((np.concatenate(parts), (self.rows, self.cols)), shape=(self.n_rows, self.x0.size)).tocsr()
+            J_an = _dpose(Ja, Xa, ts[self.a_slot])
+        return Jp @ R, _dpose(Jp[oi], Xc[oi], t[oi]), J_an
+
+    def retract(self, x, d_cam: np.ndarray, d_pts: np.ndarray) -> np.ndarray:
+        """x moved by a step: each keyframe's rotation turned by exp(d_cam[:, :3]) on the left (the increment
+        jacobian_blocks differentiates by), its translation and the points added to."""
+        nk = self.nk
+        rv = x[:6 * nk].reshape(nk, 6)
+        turned = Rotation.from_rotvec(d_cam[:, :3]) * Rotation.from_rotvec(rv[:, :3])
+        out = x.copy()
+        cam = out[:6 * nk].reshape(nk, 6)
+        cam[:, :3] = turned.as_rotvec()
+        cam[:, 3:] += d_cam[:, 3:]
+        out[6 * nk:] += d_pts.ravel()
+        return out
 
     def world_from_camera(self, Rs: np.ndarray, ts: np.ndarray) -> dict:
         """{kf id: world_from_camera} of the optimised keyframes."""
@@ -222,14 +227,11 @@ class _WindowModel:
 
 def _fit(model: _WindowModel, max_nfev: int, huber_px: float) -> np.ndarray:
     """The optimised parameter vector."""
-    # Two stages: plain least squares pulls a perturbed window into the basin (scipy's robust
-    # losses stall from far away), then the Huber loss from there discounts outlier observations.
-    res = least_squares(model.residuals, model.x0, jac=model.jacobian, loss="linear", method="trf", x_scale="jac",
-                        max_nfev=max(2, max_nfev // 2), tr_solver="lsmr", tr_options={"maxiter": 40})
-    res = least_squares(model.residuals, res.x, jac=model.jacobian, loss="huber", f_scale=huber_px, method="trf",
-                        x_scale="jac", max_nfev=max(2, max_nfev - res.nfev), tr_solver="lsmr",
-                        tr_options={"maxiter": 40})
-    return res.x
+    # Two stages: plain least squares pulls a perturbed window into the basin (robust losses stall from
+    # far away), then the Huber loss from there discounts outlier observations.
+    x, used = minimise(model, model.x0, max(2, max_nfev // 2))
+    x, _ = minimise(model, x, max(2, max_nfev - used), huber=huber_px)
+    return x
 
 
 def solve(problem: BAProblem, K: np.ndarray, max_nfev: int = 20, huber_px: float = 2.0) -> tuple[dict, np.ndarray, np.ndarray]:
@@ -237,7 +239,7 @@ def solve(problem: BAProblem, K: np.ndarray, max_nfev: int = 20, huber_px: float
 
     Parameters: per optimised keyframe a rotation increment w (R = exp(w) R0) and the
     translation of camera_from_world; per point its world position. The Jacobian is
-    analytic and sparse (2 rows per observation: 6 pose + 3 point columns).
+    analytic, by blocks (2 rows per observation: 6 pose + 3 point columns).
     """
     model = _WindowModel(problem, K)
     x = _fit(model, max_nfev, huber_px)
