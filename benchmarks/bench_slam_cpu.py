@@ -23,7 +23,7 @@ for _p in (str(ROOT / "tests"), str(ROOT), str(HERE)):
     if _p not in sys.path:
         sys.path.insert(0, _p)
 
-from tracking.synth.presets import TEST, TUNING  # noqa: E402
+from tracking.synth.presets import PRESETS, TEST, TUNING  # noqa: E402
 
 QUICK = ["tune_fast_pan", "test_fast_pan"]
 # What a change did, measured in paired runs on the same machine (kept: a later run measures only the code of its day)
@@ -40,8 +40,9 @@ def measure(name: str) -> dict:
     from peers import PlainPeer
     from scenes import load_recording
     from tracking.fusion import Tracker
+    from tracking.synth.cache import recording_folder
 
-    frames, session = load_recording(ROOT / "recordings" / name)
+    frames, session = load_recording(recording_folder(name))
     peer = PlainPeer(session.anchors, session.camera)
     plain, slam, mapped, err = [], [], [], []
     with Tracker(session.camera, session.anchors) as tr:
@@ -71,9 +72,12 @@ def measure(name: str) -> dict:
 
 
 def run(quick: bool = False) -> str:
-    names = [n for n in (QUICK if quick else TUNING + TEST) if (ROOT / "recordings" / n / "groundtruth.tum").is_file()]
+    # every 640x480 tuning and test preset (the issue's size), bundled or rendered into the recordings cache
+    names = [n for n in (QUICK if quick else TUNING + TEST)
+             if (PRESETS[n]["camera"]["width"], PRESETS[n]["camera"]["height"]) == (640, 480)]
     rows = [measure(n) for n in names]
     out = ["## SLAM tracker CPU time per frame vs plain OpenCV (issue 29, fast pans)", "",
+           "Every 640x480 tuning and test preset (bundled, or rendered into the recordings cache). "
            "Each frame goes to the plain peer (`benchmarks/peers.py` PlainPeer: detectMarkers + solvePnP) and then "
            "to the Tracker, in one process; both timed with `time.process_time()` (CPU of every thread: the "
            "tracker's detection worker and mapping thread count), mean over the recording. `passes / frame`: "
