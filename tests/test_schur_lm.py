@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 from test_slam import K, cv_project, look, scene_points
 from tracking.poses import invert, make_pose
 from tracking.slam.ba import BAProblem, _fit, _WindowModel
-from tracking.slam.schur_lm import robust_cost
+from tracking.slam.schur_lm import minimise, robust_cost
 
 HUBER = 2.0
 
@@ -114,6 +114,21 @@ def test_reaches_the_minimum_next_to_the_truth(seed, anchors):
     _, ts10, _ = model.unpack(x10)
     for i, k in enumerate(pr.kf_ids):
         assert np.linalg.norm(ts10[i] - truth[k][:3, 3]) < 2e-3
+
+
+def test_keeps_to_its_evaluation_budget_and_never_raises_the_cost():
+    """The mapping thread's time per window is the budget: never more evaluations than given, and each
+    accepted step lowers the cost (a rejected one is not kept)."""
+    pr, _, _ = window(4)
+    model = _WindowModel(pr, K)
+    start = robust_cost(model.residuals(model.x0), HUBER)
+    last = start
+    for budget in (2, 3, 5, 8):
+        x, used = minimise(model, model.x0, budget, huber=HUBER)
+        cost = robust_cost(model.residuals(x), HUBER)
+        assert used <= budget and cost <= last
+        last = cost
+    assert last < 0.5 * start
 
 
 def test_robust_cost_is_scipys_huber():
