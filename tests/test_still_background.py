@@ -65,3 +65,27 @@ def test_too_little_background_gives_no_verdict(extractor):
     whole = np.array([[0, 0], [W, 0], [W, H], [0, H]], np.float32)
     n, shift, _ = background_shift((extractor.extract(img), None, whole), (extractor.extract(img), None, whole))
     assert n < MIN_BACKGROUND and np.isnan(shift)
+
+
+def test_points_near_the_anchors_outline_as_opencv_measures_them():
+    """`_inside` (all points at once) says what cv2.pointPolygonTest(region, p, measureDist=True) > -grow says of
+    each point: inside, or outside by less than `grow` px; on a convex outline (what outline_region gives) and on
+    a concave one, with points spread over and around it."""
+    import cv2
+
+    from tracking.slam.anchor_motion import _inside
+
+    rng = np.random.default_rng(11)
+    hull = cv2.convexHull(rng.uniform(100, 400, (12, 2)).astype(np.float32)).reshape(-1, 2)
+    concave = np.array([[100, 100], [400, 100], [400, 400], [250, 200], [100, 400]], np.float32)
+    for region in (hull, concave):
+        px = rng.uniform(50, 450, (3000, 2))
+        for grow in (0.5, 12.0):
+            want = np.array([cv2.pointPolygonTest(region.reshape(-1, 1, 2), (float(x), float(y)), True) > -grow
+                             for x, y in px])
+            got = _inside(px, region, grow)
+            # (a point within a micro-pixel of the grown edge may fall either way in float32 against float64)
+            d = np.array([cv2.pointPolygonTest(region.reshape(-1, 1, 2), (float(x), float(y)), True) for x, y in px])
+            tie = np.abs(d + grow) < 1e-3
+            assert want.any() and (~want).any() and (got == want)[~tie].all()
+    assert not _inside(np.zeros((5, 2)), None, 12.0).any() and _inside(np.zeros((0, 2)), hull, 12.0).shape == (0,)

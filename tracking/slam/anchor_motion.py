@@ -77,11 +77,23 @@ STILL_PX = 1.0          # pixels: a background match that moved less than this b
 
 
 def _inside(px: np.ndarray, region: np.ndarray | None, grow: float) -> np.ndarray:
-    """(N,) bool: pixels px (N,2) inside (or within `grow` px of) the convex polygon `region`."""
-    if region is None:
+    """(N,) bool: pixels px (N,2) inside (or within `grow` px of) the polygon `region` (M,2): what
+    cv2.pointPolygonTest(region, p, True) > -grow says of each, for all points at once (one call a point
+    took 2 ms a frame's features)."""
+    if region is None or len(px) == 0:
         return np.zeros(len(px), bool)
-    poly = np.asarray(region, np.float32).reshape(-1, 1, 2)
-    return np.array([cv2.pointPolygonTest(poly, (float(x), float(y)), True) > -grow for x, y in px], bool)
+    poly = np.asarray(region, np.float32).reshape(-1, 2).astype(float)
+    p = np.asarray(px, float).reshape(-1, 1, 2)
+    a, b = poly, np.roll(poly, -1, axis=0)                      # the edges a -> b
+    ab = b - a
+    t = np.clip(((p - a) * ab).sum(2) / np.maximum((ab * ab).sum(1), 1e-12), 0.0, 1.0)
+    near = np.sqrt((((a + t[..., None] * ab) - p) ** 2).sum(2)).min(axis=1) < grow
+    # even-odd crossings of a ray to +x: inside a polygon of any shape
+    y, x = p[..., 1], p[..., 0]
+    straddle = (a[:, 1] > y) != (b[:, 1] > y)
+    x_cross = a[:, 0] + (y - a[:, 1]) * ab[:, 0] / np.where(ab[:, 1] == 0, 1.0, ab[:, 1])
+    inside = (straddle & (x < x_cross)).sum(axis=1) % 2 == 1
+    return inside | near
 
 
 def _background_matches(before: tuple, now: tuple, grow_px: float) -> tuple[np.ndarray, np.ndarray]:
