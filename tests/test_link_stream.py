@@ -741,7 +741,6 @@ def test_a_request_for_a_line_already_being_resent_is_ignored():
     assert s.epoch == 1
 
 
-
 class _Firmware:
     """Marlin's line rules, written here from docs/domain.md §4: N must be the last line + 1, else `Error:` +
     `Resend:` + `ok`; a line in `damage` arrives damaged once (checksum error, asked for again); a line in
