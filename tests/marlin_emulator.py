@@ -80,6 +80,7 @@ class MarlinPty:
         self._answered = 0
         self._autoreport_on = False
         self._lines: list[str] = []
+        self._handling = False
         self._cond = threading.Condition()
         self._closed = threading.Event()
         self._write_lock = threading.Lock()
@@ -135,7 +136,7 @@ class MarlinPty:
                         self._received_numbered += 1
                         self.max_outstanding = max(self.max_outstanding, self._received_numbered - self._answered)
                     self._lines.append(text)
-                    self._cond.notify()
+                    self._cond.notify_all()
 
     def _worker(self) -> None:
         while True:
@@ -144,9 +145,15 @@ class MarlinPty:
                 if self._closed.is_set():
                     return
                 text = self._lines.pop(0)
+                self._handling = True
             if self.dropped.is_set():
                 return
-            self._handle(text)
+            try:
+                self._handle(text)
+            finally:
+                with self._cond:
+                    self._handling = False
+                    self._cond.notify_all()
 
     def _reporter(self) -> None:
         while not self._closed.wait(self.report_interval):
@@ -282,7 +289,25 @@ class MarlinPty:
             time.sleep(self.report_interval)
 
     # -- control ---------------------------------------------------------------------------
+    def _idle(self) -> bool:
+        """Nothing left to run: every byte the host wrote has been read and handled (or the link is gone)."""
+        if self.dropped.is_set() or self._closed.is_set() or self.halted:
+            return True
+        if self._lines or self._handling:
+            return False
+        readable, _, _ = select.select([self._master], [], [], 0)
+        return not readable
+
+    def settle(self, timeout: float = 10.0) -> None:
+        """Wait until the firmware has run everything the host has written so far.
+
+        A host may stop waiting for the answers to its last lines (the safe stop waits at most a second)
+        while a loaded machine has not run them yet; a test reading `executed` must wait for them."""
+        with self._cond:
+            self._cond.wait_for(self._idle, timeout)
+
     def heaters_off(self) -> bool:
+        self.settle()
         return self.hotend_target == 0 and self.bed_target == 0
 
     def close(self) -> None:

@@ -50,6 +50,7 @@ def test_lost_print_is_resumed_not_restarted(qtbot, window, tmp_path, bed_profil
         dlg.port.setCurrentText(emu.port)
         qtbot.mouseClick(dlg.send_button, Qt.MouseButton.LeftButton)
         qtbot.waitUntil(lambda: bool(finished), timeout=TIMEOUT_MS)
+        emu.settle()
         first = list(emu.executed)
     ran = [c for c in first if c in set(program)]
     assert ran == program[: cut + 1]  # the emulator ran up to the dropped command, no further
@@ -79,6 +80,7 @@ def test_lost_print_is_resumed_not_restarted(qtbot, window, tmp_path, bed_profil
         qtbot.mouseClick(dlg.resume_button, Qt.MouseButton.LeftButton)
         assert dlg.printing
         qtbot.waitUntil(lambda: bool(finished), timeout=TIMEOUT_MS)
+        emu.settle()
         second = list(emu.executed)
     assert finished[0].error is None, finished[0].error
     text = asked[-1][1]

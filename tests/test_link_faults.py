@@ -56,6 +56,7 @@ def move(i: int) -> str:
 
 def ran(emu: MarlinPty) -> list[str]:
     """What the firmware ran, without the host's own queries (M105, M110, M115, M155)."""
+    emu.settle()
     return [c for c in emu.executed if not c.startswith(HOST)]
 
 
@@ -187,6 +188,7 @@ def test_drop_after_a_host_poll_saves_the_right_line(tmp_path):
             bounded(p.print_gcode, lines, gcode_path=str(gcode))
         p.close()
         first = ran(emu)
+        emu.settle()
         polls = sum(c == "M105" for c in emu.executed)
     assert polls == 6
     state = JobState.load(job)
@@ -303,6 +305,7 @@ def test_unwritable_job_file_refuses_before_printing(tmp_path, capsys):
     gcode = write_gcode(tmp_path, lines)
     with MarlinPty() as emu:
         rc = main(["print", str(gcode), "--port", emu.port, "--job", str(tmp_path / "no" / "such" / "job.json")])
+        emu.settle()
         assert emu.executed == []
     err = capsys.readouterr().err
     assert rc == 2 and "cannot write the job file" in err and len(err.strip().splitlines()) == 1
@@ -473,6 +476,7 @@ def test_bad_job_file_is_refused_naming_file_and_field(tmp_path, capsys, key, va
     assert str(job) in str(info.value) and f"'{key}'" in str(info.value) and words in str(info.value)
     with MarlinPty() as emu:
         rc = main(["print", "--resume", str(job), "--port", emu.port])
+        emu.settle()
         assert emu.executed == []
     err = capsys.readouterr().err
     assert rc == 2 and f"'{key}'" in err and len(err.strip().splitlines()) == 1
