@@ -18,7 +18,7 @@ import pytest
 import requests
 
 from arapp.printing.link import LinkError, PrinterHalted
-from arapp.printing.link.moonraker import FileInUse, MoonrakerError, MoonrakerLink, check_moonraker
+from arapp.printing.link.moonraker import FileInUse, JobWatch, MoonrakerError, MoonrakerLink, check_moonraker
 
 
 def commands(lines) -> int:
@@ -297,3 +297,28 @@ def test_an_upload_over_the_file_being_printed_is_retried_then_explained(moonrak
     assert "API key" not in text
     # the stored file is the job's, not the upload refused over it
     assert (moonraker_server.gcodes / "in-use.gcode").read_bytes() == ("\n".join(lines) + "\n").encode()
+
+
+def test_a_file_loaded_but_not_yet_started_is_a_job_about_to_start(moonraker_server):
+    """Klipper's SDCARD_PRINT_FILE loads the file (print_stats: "standby", our file name, durations 0) and
+    starts reading it on the reactor's next turn; a status report between the two once ended a print as
+    "cancelled" under load. M23 loads a file the same way and stops there, so Klipper's own report of that
+    moment is what the watch is given: waiting; then M24 starts it and it ends done. Once loaded, the file
+    reset (SDCARD_RESET_FILE, before it was seen printing) is a cancelled job."""
+    link = MoonrakerLink(moonraker_server.url)
+    link.connect()
+    for name in ("loaded.gcode", "reset.gcode"):
+        link.upload(("\n".join(job(30)) + "\n").encode(), name=name, start=False)
+    link.close()
+    for name, then, outcome in (("loaded.gcode", "M24", "done"), ("reset.gcode", "SDCARD_RESET_FILE", "cancelled")):
+        watch = JobWatch(name, moonraker_server.query("print_stats")["print_stats"])
+        moonraker_server.gcode(f"M23 {name}")
+        ps = moonraker_server.query("print_stats")["print_stats"]
+        assert (ps["state"], ps["filename"]) == ("standby", name)   # Klipper's report between load and start
+        assert watch.update(ps) == "waiting"
+        moonraker_server.gcode(then)
+        deadline = time.monotonic() + 30
+        while (ps := moonraker_server.query("print_stats")["print_stats"])["state"] in JobWatch.ACTIVE:
+            assert time.monotonic() < deadline, ps
+            time.sleep(0.1)
+        assert watch.update(ps) == outcome, ps

@@ -161,7 +161,10 @@ class JobWatch:
 
     Klipper reports what changed every 250 ms, so a short job can start and end between two reports:
     the job counts as seen once print_stats names our file and differs from its values before the upload
-    (state, file, durations), or once it was printing.
+    (state, file, durations), or once it was printing. `SDCARD_PRINT_FILE` loads the file (state "standby",
+    our file name, durations 0) and starts reading it on the reactor's next turn: a report between the two
+    shows our file in standby, which is a job about to start, not one that ended; once seen, our file
+    leaving the report before the job was seen printing means it was reset or replaced.
     """
 
     ACTIVE = ("printing", "paused")
@@ -171,14 +174,18 @@ class JobWatch:
         self.filename = filename
         self.before = {k: before.get(k) for k in self._FIELDS}
         self.started = False
+        self.loaded = False
 
     def update(self, ps: dict) -> str:
         state, ours = ps.get("state"), ps.get("filename") == self.filename
         if ours and state in self.ACTIVE:
             self.started = True
             return state
-        fresh = self.started or (ours and any(ps.get(k) != self.before[k] for k in self._FIELDS))
+        fresh = self.started or self.loaded or (ours and any(ps.get(k) != self.before[k] for k in self._FIELDS))
         if not fresh:
+            return "waiting"
+        if state == "standby" and ours and not self.started:
+            self.loaded = True
             return "waiting"
         if state == "complete" and ours:
             return "done"
