@@ -140,6 +140,19 @@ def pytest_collection_modifyitems(config, items):
                                  GROUP_OF.get(item.path.name, item.path.name)))
 
 
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """A failed test that used a real printer server gets the end of that server's log in its report (CI
+    prints only the report: the cause of a server-side stall is there, not in the test's own output)."""
+    outcome = yield
+    report = outcome.get_result()
+    if report.when == "call" and report.failed:
+        for name in ("prusalink_server", "moonraker_server"):
+            server = getattr(item, "funcargs", {}).get(name)
+            if server is not None:
+                report.sections.append((f"{name}: end of its log", server.log_tail()))
+
+
 # The real Moonraker + Klippy, started once per session for every test that asks (tests/moonraker_server.py).
 from moonraker_server import moonraker_server  # noqa: E402,F401
 
