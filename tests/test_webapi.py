@@ -95,3 +95,55 @@ def test_file_position_gives_commands_done_and_layer():
     assert fp.at(ends[1] - 1) == (0, -1) and fp.at(ends[1]) == (1, -1)   # G90 done
     assert fp.at(ends[5]) == (3, 0)                                        # G1 X2 done, layer 0
     assert fp.at(len(data)) == (4, 1) and fp.at_fraction(1.0) == (4, 1)
+
+
+def _silent_server():
+    """A listening socket nobody accepts from: the kernel completes the connection and takes the request,
+    no answer ever comes (a server that is up but stuck)."""
+    import socket
+
+    sock = socket.socket()
+    sock.bind(("127.0.0.1", 0))
+    sock.listen(8)
+    return sock
+
+
+def _closed_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]   # closed again: nothing listens there
+
+
+@pytest.mark.parametrize("kind", ["prusalink", "moonraker", "octoprint"])
+def test_no_answer_is_told_apart_from_unreachable_and_a_send_says_to_check_the_printer(kind):
+    from arapp.printing.link import LinkLost
+    from arapp.printing.link.octoprint import OctoPrintLink
+    from arapp.printing.link.prusalink import PrusaLinkLink
+
+    make = {"prusalink": lambda url: PrusaLinkLink(url, KEY, timeout=0.3),
+            "moonraker": lambda url: MoonrakerLink(url, KEY, timeout=0.3),
+            "octoprint": lambda url: OctoPrintLink(url, KEY, timeout=0.3)}[kind]
+    server = {"prusalink": "PrusaLink", "moonraker": "Moonraker", "octoprint": "OctoPrint"}[kind]
+    sock = _silent_server()
+    try:
+        url = f"http://127.0.0.1:{sock.getsockname()[1]}"
+        link = make(url)
+        link._session = SecretSession()   # as connect() leaves it, without the requests connect() makes
+        for method, path in (("GET", "/api/version"), ("POST", "/api/files/local")):
+            with pytest.raises(LinkLost) as info:
+                link._request(method, path)
+            text = str(info.value)
+            # the rule: the server named, the request named, the time waited, one line, no key
+            assert text.startswith(f"{server} at {url} took {method} {path} but did not answer within 0.3 s")
+            assert ("check the printer before you send the job again" in text) == (method == "POST")
+            assert "\n" not in text and KEY not in text
+    finally:
+        sock.close()
+    url = f"http://127.0.0.1:{_closed_port()}"
+    link = make(url)
+    link._session = SecretSession()
+    with pytest.raises(LinkLost) as info:
+        link._request("GET", "/api/version")
+    assert str(info.value) == f"{server} at {url} cannot be reached: ConnectionError"

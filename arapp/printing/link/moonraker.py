@@ -45,7 +45,7 @@ from .base import (
 )
 from .job import JobState, Program, new_state
 from .webapi import (API_KEY_HEADER, FileProgress, SecretSession, check_base_url, finish_job, gcode_bytes,
-                     server_message)
+                     server_message, unanswered)
 
 log = logging.getLogger("arapp.printing.moonraker")
 
@@ -233,7 +233,7 @@ class MoonrakerLink(PrintLink):
         try:
             r = self._session.request(method, self.url + path, timeout=self.timeout, **kw)
         except requests.RequestException as exc:
-            raise LinkLost(f"Moonraker at {self.url} cannot be reached: {type(exc).__name__}") from None
+            raise LinkLost(unanswered("Moonraker", self.url, method, path, exc, self.timeout)) from None
         if r.status_code == 403 and any(m in r.text.lower() for m in IN_USE_MESSAGES):
             # (Moonraker 0.11 answers "Forbidden" and names the reason only in its traceback)
             raise FileInUse(f"Moonraker at {self.url} refused {method} {path.split('?')[0]} (HTTP 403): Klipper is "

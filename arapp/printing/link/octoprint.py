@@ -44,7 +44,7 @@ from .base import (
     eta,
 )
 from .job import JobState, Program, new_state
-from .webapi import API_KEY_HEADER, SecretSession, check_base_url, finish_job
+from .webapi import API_KEY_HEADER, SecretSession, check_base_url, finish_job, unanswered
 
 log = logging.getLogger("arapp.printing.octoprint")
 
@@ -96,8 +96,7 @@ class OctoPrintLink(PrintLink):
         try:
             r = self._session.request(method, self.url + path, timeout=self.timeout, **kw)
         except requests.RequestException as exc:
-            # The exception text holds the URL, never the headers.
-            raise LinkLost(f"OctoPrint at {self.url} cannot be reached: {type(exc).__name__}") from None
+            raise LinkLost(unanswered("OctoPrint", self.url, method, path, exc, self.timeout)) from None
         if r.status_code in (401, 403):
             raise OctoPrintError(
                 f"OctoPrint at {self.url} refused the API key (HTTP {r.status_code}); "

@@ -45,7 +45,7 @@ from .base import (
 )
 from .job import JobState, Program, new_state
 from .webapi import (API_KEY_HEADER, FileProgress, SecretSession, check_base_url, finish_job, gcode_bytes,
-                     server_message)
+                     server_message, unanswered)
 
 log = logging.getLogger("arapp.printing.prusalink")
 
@@ -108,7 +108,7 @@ class PrusaLinkLink(PrintLink):
         try:
             r = self._session.request(method, self.url + path, timeout=self.timeout, allow_redirects=True, **kw)
         except requests.RequestException as exc:
-            raise LinkLost(f"PrusaLink at {self.url} cannot be reached: {type(exc).__name__}") from None
+            raise LinkLost(unanswered("PrusaLink", self.url, method, path, exc, self.timeout)) from None
         where = path.split("?")[0]
         if r.status_code in (401, 403):
             if self._key:

@@ -118,6 +118,20 @@ class SecretSession(requests.Session):
             prepared_request.hooks["response"] = []
 
 
+def unanswered(server: str, url: str, method: str, path: str, exc: requests.RequestException,
+               timeout: float) -> str:
+    """One line for a request that got no HTTP answer: a server that cannot be reached (refused, no route,
+    no name) is told apart from one that took the request and did not answer in `timeout` seconds (busy or
+    stuck), and a request that may have started a job says to look at the printer. Never the headers."""
+    if isinstance(exc, requests.ReadTimeout):
+        text = (f"{server} at {url} took {method} {path.split('?')[0]} but did not answer within {timeout:g} s "
+                "(busy or stuck)")
+        if method in ("POST", "PUT"):
+            text += "; it may still act on it: check the printer before you send the job again"
+        return text
+    return f"{server} at {url} cannot be reached: {type(exc).__name__}"
+
+
 def server_message(r: requests.Response, limit: int = 200) -> str:
     """The reason a server gave for refusing a request, on one line: Moonraker's `{"error": {"message"}}`,
     PrusaLink's `{"title", "message"}`, else the body's text (tracebacks and HTML dropped)."""
