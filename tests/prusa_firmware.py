@@ -96,22 +96,20 @@ def prusa_answer(command: str) -> list[str] | None:
 class PrusaFirmwarePty(VirtualPrinterPty):
     """A VirtualPrinterPty whose firmware answers PrusaLink's Prusa-only queries (see module doc)."""
 
-    def __init__(self, *, m400_delay: float = 0.2, **kwargs):
+    def __init__(self, *, m400_delay: float = 0.2, m400_max: float = 5.0, **kwargs):
         self.prusa_queries: list[str] = []
         self.m400_delay = m400_delay
+        self.m400_max = m400_max
+        # set by the PrusaLink fixture: whether PrusaLink has recorded the starting job's path (see _hold_m400)
+        self.job_recorded = None
         self.answered: list[bytes] = []  # the lines the firmware wrote to the host, as they went
         kwargs.setdefault("simulated_errors", [])  # PrusaLink's own serial tests are not the subject here
         super().__init__(**kwargs)
 
     def _write_to_printer(self, data: bytes) -> bool:
         number, command = _body(data)
-        if command == "M400" and self.m400_delay:
-            # M400 waits for the moves in the planner to end: on a printer that takes a while. PrusaLink 0.8.1
-            # needs that while: it starts its file printer thread before it records the job's path, and the
-            # thread's first numbered line (M110 N0) writes the power-panic record, which fails on the
-            # missing path and breaks PrusaLink for good ("connect_path none is not an allowed value"); the
-            # upload chime's M400 is the line in flight just then.
-            time.sleep(self.m400_delay)
+        if command == "M400":
+            self._hold_m400()
         answer = prusa_answer(command)
         printer = self.printer
         m110 = _M110.match(command)
@@ -135,6 +133,22 @@ class PrusaFirmwarePty(VirtualPrinterPty):
                 printer._send(line)
             printer._send("ok")
         return True
+
+    def _hold_m400(self) -> None:
+        """M400 waits for the moves in the planner to end: on a printer that takes a while. PrusaLink 0.8.1
+        needs that while: it starts its file printer thread before it records the job's path, and the
+        thread's first numbered line (M110 N0) writes the power-panic record, which fails on the missing path
+        and breaks PrusaLink for good ("connect_path none is not an allowed value"); the upload chime's M400
+        is the line in flight just then. A fixed 0.2 s was not always enough on a loaded machine (PrusaLink's
+        command thread not run in time: every later upload then hung), so the answer also waits, up to
+        `m400_max` seconds, until PrusaLink shows the job's path."""
+        time.sleep(self.m400_delay)
+        deadline = time.monotonic() + self.m400_max
+        # polled: the path is PrusaLink's state, in another process, with nothing to wait on
+        while self.job_recorded is not None and not self._closed.is_set() and time.monotonic() < deadline:
+            if self.job_recorded():
+                return
+            time.sleep(0.05)
 
     def _prusa_temperatures(self) -> str:
         p = self.printer

@@ -128,6 +128,15 @@ class PrusaLinkServer:
                                    f"{self.log_tail()}")
             time.sleep(0.25)
 
+    def job_recorded(self) -> bool:
+        """Whether PrusaLink shows a job with its file's path (it records the path after it has started the
+        job's file printer thread; tests/prusa_firmware.py holds the chime's M400 until then)."""
+        try:
+            r = requests.get(self.url + "/api/v1/job", headers={"X-Api-Key": API_KEY}, timeout=2)
+            return r.status_code == 200 and bool((r.json().get("file") or {}).get("path"))
+        except (requests.RequestException, ValueError):
+            return False
+
     def stop(self) -> None:
         self.proc.terminate()
         try:
@@ -148,6 +157,7 @@ def prusalink_server(tmp_path_factory):
     base = tmp_path_factory.mktemp("prusalink")
     firmware = PrusaFirmwarePty()
     server = PrusaLinkServer(base, firmware)
+    firmware.job_recorded = server.job_recorded
     try:
         server.wait_state()
         yield server
