@@ -322,3 +322,28 @@ def test_a_file_loaded_but_not_yet_started_is_a_job_about_to_start(moonraker_ser
             assert time.monotonic() < deadline, ps
             time.sleep(0.1)
         assert watch.update(ps) == outcome, ps
+
+
+def test_job_watch_reads_klippers_print_stats_as_its_rules_say():
+    """The watch's rules on report sequences Klipper's print_stats can give (its fields as Klipper sets them:
+    set_current_file resets to "standby" with the file's name, note_start "printing", note_complete
+    "complete", note_cancel "cancelled", reset() "standby" with no file); no server needed."""
+    before = {"state": "complete", "filename": "old.gcode", "total_duration": 9.0, "print_duration": 8.0}
+    loaded = {"state": "standby", "filename": "ours.gcode", "total_duration": 0.0, "print_duration": 0.0}
+    cases = [
+        ([before], ["waiting"]),                                           # nothing new yet
+        ([{**before, "filename": "other.gcode"}], ["waiting"]),            # another file, never ours
+        ([loaded, {**loaded, "state": "printing"}, {**loaded, "state": "complete", "print_duration": 2.0}],
+         ["waiting", "printing", "done"]),
+        ([loaded, {**loaded, "state": "complete", "print_duration": 0.5}], ["waiting", "done"]),  # too short to see
+        ([{**loaded, "state": "complete", "print_duration": 0.5}], ["done"]),                     # nor its load
+        ([loaded, {**loaded, "state": "paused"}, {**loaded, "state": "cancelled"}], ["waiting", "paused", "cancelled"]),
+        ([loaded, {**loaded, "state": "error", "message": "MCU"}], ["waiting", "error"]),
+        ([loaded, {**before, "state": "standby", "filename": ""}], ["waiting", "cancelled"]),   # reset once loaded
+        ([{**loaded, "state": "printing"}, {**loaded, "filename": ""}], ["printing", "cancelled"]),  # reset mid-job
+        ([{**loaded, "state": "printing"}, {**loaded, "state": "complete", "filename": "next.gcode"}],
+         ["printing", "cancelled"]),                                       # another file took over
+    ]
+    for reports, outcomes in cases:
+        watch = JobWatch("ours.gcode", before)
+        assert [watch.update(r) for r in reports] == outcomes, reports
