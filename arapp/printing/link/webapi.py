@@ -127,7 +127,9 @@ def unanswered(server: str, url: str, method: str, path: str, exc: requests.Requ
         text = (f"{server} at {url} took {method} {path.split('?')[0]} but did not answer within {timeout:g} s "
                 "(busy or stuck)")
         if method in ("POST", "PUT"):
-            text += "; it may still act on it: check the printer before you send the job again"
+            text += "; it may still act on it: check the printer"
+            if "/files" in path or "/print/start" in path:   # an upload or a start: sent twice, printed twice
+                text += " before you send the job again"
         return text
     return f"{server} at {url} cannot be reached: {type(exc).__name__}"
 
