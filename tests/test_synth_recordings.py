@@ -18,7 +18,7 @@ from tracking.synth import scene_from_arg
 from tracking.synth.patterns import anchor_corners
 from tracking.synth.cache import bundled_folder, cached_recording, recording_folder, scene_key
 from tracking.synth.presets import EXTRA_TUNING, PRESETS, TEST, TUNING
-from tracking.synth.renderer import DeskRenderer
+from tracking.synth.renderer import DeskRenderer, SceneTrajectory
 
 from conftest import ROOT
 from scenes import rolling_shutter_pixels as pixels_under_rolling_shutter
@@ -66,12 +66,12 @@ def ground_truth_pixels(session, anchor, pose):
     return session.camera.project_world(obj, pose)
 
 
-def rolling_shutter_pixels(session, anchor, renderer, t, readout):
+def rolling_shutter_pixels(session, anchor, truth, t, readout):
     """Ground-truth corners under a rolling shutter: each corner seen at the time of the row it lands on
     (row y exposed at t + readout * ((y + 0.5) / H - 0.5)), by fixed-point iteration on the trajectory."""
     obj = transform_points(anchor.world_from_anchor, anchor_corners(anchor)).reshape(-1, 3)
     cam = dataclasses.replace(session.camera, readout=readout)
-    return pixels_under_rolling_shutter(cam, obj, renderer.world_from_camera, t, iterations=4).reshape(-1, 4, 2)
+    return pixels_under_rolling_shutter(cam, obj, truth.world_from_camera, t, iterations=4).reshape(-1, 4, 2)
 
 
 @pytest.mark.parametrize("name", list(PRESETS))
@@ -91,7 +91,7 @@ def test_recording_is_complete_and_consistent(name):
     fx = PRESETS[name].get("effects", {})
     readout = float(fx.get("rolling_shutter") or 0.0)
     occ = fx.get("occluder") or {}
-    renderer = DeskRenderer(scene_from_arg(name)) if readout else None
+    truth = SceneTrajectory(scene_from_arg(name)) if readout else None
     blur = float(fx.get("motion_blur") or 0.0)
     errs = []
     for anchor_index, anchor in enumerate(session.anchors):
@@ -104,7 +104,7 @@ def test_recording_is_complete_and_consistent(name):
                 if blur * np.abs(moved).max() / (j1 - j0) > 5.0:  # smear in px (detections off by > 1 px from ~6)
                     continue
             if readout:
-                gt = rolling_shutter_pixels(session, anchor, renderer, times[f.index], readout)
+                gt = rolling_shutter_pixels(session, anchor, truth, times[f.index], readout)
             else:
                 gt = ground_truth_pixels(session, anchor, poses[f.index])
             for k, c in detect_precise(anchor, f.image).items():

@@ -73,6 +73,23 @@ def _texture(w, h, ppm, seed, x_min, y_max, style):
                    lambda: make_desk_texture(w, h, ppm, seed, x_min=x_min, y_max=y_max, style=style))
 
 
+class SceneTrajectory:
+    """A scene's ground-truth camera poses alone: what DeskRenderer moves its camera along, without the desk
+    texture and pixel rays it builds to draw (a second or two per scene), for checks that need only the
+    poses (a rolling shutter's per-row poses, say)."""
+
+    def __init__(self, scene: Scene):
+        self.pose_desk = make_trajectory(scene.trajectory, scene.duration, scene.seed)
+        self.centre = scene.centre_desk
+        self.world_from_desk = scene.world_from_desk
+
+    def world_from_camera(self, t: float) -> np.ndarray:
+        """Ground-truth world_from_camera (4x4) at time t (seconds)."""
+        desk_from_cam = self.pose_desk(t).copy()
+        desk_from_cam[:3, 3] += self.centre
+        return self.world_from_desk @ desk_from_cam
+
+
 class DeskRenderer:
     """Renders a `Scene`: `render(i)` -> (BGR uint8 frame, world_from_camera, t).
 
@@ -100,7 +117,8 @@ class DeskRenderer:
         # the anchors printed on the desk (none when the scene has them taken away: `desk.anchors_shown`)
         self.printed = self.patterns if scene.anchors_shown else []
         self.centre = c
-        self.pose_desk = make_trajectory(scene.trajectory, scene.duration, scene.seed)
+        self.truth = SceneTrajectory(scene)
+        self.pose_desk = self.truth.pose_desk
         self.rng = np.random.default_rng(scene.seed + 101)
         ae = scene.effects.get("auto_exposure")
         self.ae = AutoExposure(**ae) if ae else None
@@ -112,9 +130,7 @@ class DeskRenderer:
 
     def world_from_camera(self, t: float) -> np.ndarray:
         """Ground-truth pose at time t (seconds)."""
-        desk_from_cam = self.pose_desk(t).copy()
-        desk_from_cam[:3, 3] += self.centre
-        return self.world_from_desk @ desk_from_cam
+        return self.truth.world_from_camera(t)
 
     # -- rendering ---------------------------------------------------------------
     def render_clean(self, world_from_camera: np.ndarray, region: tuple[slice, slice] | None = None) -> np.ndarray:
