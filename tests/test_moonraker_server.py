@@ -351,4 +351,7 @@ def test_job_watch_reads_klippers_print_stats_as_its_rules_say():
     ]
     for reports, outcomes in cases:
         watch = JobWatch("ours.gcode", before)
-        assert [watch.update(r) for r in reports] == outcomes, reports
+        assert [watch.update(r, now=0.1 * i) for i, r in enumerate(reports)] == outcomes, reports
+    # loaded and never started (Klipper failed to begin reading it): waited for, then ended, not forever
+    watch = JobWatch("ours.gcode", before, start_wait_s=10.0)
+    assert [watch.update(loaded, now=t) for t in (0.0, 9.9, 10.0)] == ["waiting", "waiting", "cancelled"]

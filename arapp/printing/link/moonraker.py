@@ -164,29 +164,35 @@ class JobWatch:
     (state, file, durations), or once it was printing. `SDCARD_PRINT_FILE` loads the file (state "standby",
     our file name, durations 0) and starts reading it on the reactor's next turn: a report between the two
     shows our file in standby, which is a job about to start, not one that ended; once seen, our file
-    leaving the report before the job was seen printing means it was reset or replaced.
+    leaving the report before the job was seen printing means it was reset or replaced, and our file still
+    in standby `start_wait_s` seconds later means Klipper did not start it (both end the job as cancelled).
     """
 
     ACTIVE = ("printing", "paused")
     _FIELDS = ("state", "filename", "total_duration", "print_duration")
 
-    def __init__(self, filename: str, before: dict):
+    def __init__(self, filename: str, before: dict, start_wait_s: float = 10.0):
         self.filename = filename
         self.before = {k: before.get(k) for k in self._FIELDS}
         self.started = False
-        self.loaded = False
+        self.loaded_at: float | None = None  # time.monotonic() when our file was first seen loaded
+        self.start_wait_s = start_wait_s
 
-    def update(self, ps: dict) -> str:
+    def update(self, ps: dict, now: float | None = None) -> str:
+        """The job's outcome so far from print_stats `ps` (Klipper's fields merged as reported) at `now`
+        (time.monotonic() seconds; the clock when None)."""
+        now = time.monotonic() if now is None else now
         state, ours = ps.get("state"), ps.get("filename") == self.filename
         if ours and state in self.ACTIVE:
             self.started = True
             return state
-        fresh = self.started or self.loaded or (ours and any(ps.get(k) != self.before[k] for k in self._FIELDS))
+        loaded = self.loaded_at is not None
+        fresh = self.started or loaded or (ours and any(ps.get(k) != self.before[k] for k in self._FIELDS))
         if not fresh:
             return "waiting"
         if state == "standby" and ours and not self.started:
-            self.loaded = True
-            return "waiting"
+            self.loaded_at = now if self.loaded_at is None else self.loaded_at
+            return "waiting" if now - self.loaded_at < self.start_wait_s else "cancelled"
         if state == "complete" and ours:
             return "done"
         if state == "error":
