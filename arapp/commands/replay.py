@@ -1,7 +1,10 @@
 """`arapp replay`: run the tracking pipeline headless on a recording and write its outputs."""
 
 import sys
+from pathlib import Path
 
+# the anchor list of what a replay that tracked nothing found in the video, written into its output folder
+FOUND_ANCHORS = "anchors-found.json"
 HELP = "replay a recording or a video through tracking and rendering; write poses, CSV, overlay video, report"
 
 
@@ -13,7 +16,8 @@ def add_arguments(parser):
     parser.add_argument("--anchors", help="JSON file with the anchors to track (a list as in session.json); default: "
                         "a recording's own, else one aruco DICT_ARUCO_MIP_36h12 id 0 of 0.06 m (what `arapp markers "
                         "aruco` prints)")
-    parser.add_argument("--out", required=True, help="output folder (created)")
+    parser.add_argument("--out", help="output folder (created; an existing one has its outputs replaced); default "
+                        "out/replay-NAME in the current folder, NAME the recording's or video's name")
     parser.add_argument("--no-video", action="store_true", help="skip overlay.mp4 (faster)")
     parser.add_argument("--model", help="model to draw on the anchor (NURBS JSON or STL/OBJ/PLY/3MF/GLB)")
     parser.add_argument("--size", type=float, help="model size on the anchor in mm (default: the model's own)")
@@ -48,6 +52,14 @@ def check_args(args) -> None:
         raise ValueError(f"--layer must be 0 or more (layers count from 0), got {args.layer}")
 
 
+def default_out(recording: str) -> str:
+    """The output folder of a replay given no --out: out/replay-NAME, NAME the recording folder's or the
+    video's name without its extension (`arapp demo` writes to out/demo the same way)."""
+    path = Path(recording)
+    name = (path.name if path.is_dir() else path.stem) or "recording"
+    return str(Path("out") / f"replay-{name}")
+
+
 def run(args):
     from arapp.exchange.staging import staged_folder
     from arapp.geometry.placement import check_size_mm
@@ -69,6 +81,9 @@ def run(args):
                          tracker_params={"marker_every": args.marker_every} if not args.no_slam else {},
                          calibration=args.calibration, anchors=args.anchors, occlusion=args.occlusion,
                          scene=args.scene, save_scene=args.save_scene)
+    if args.out is None:
+        args.out = default_out(args.recording)
+        print(f"replay: writing to {args.out} (--out to choose the folder)", flush=True)
     # Written to a temporary folder moved into place at the end: a failure leaves no (empty) --out behind.
     with staged_folder(args.out) as tmp:
         report = replay(args.recording, tmp, opts, progress=terminal_progress(sys.stderr),  # stderr as now
@@ -85,10 +100,12 @@ def run(args):
 
 
 def say_why_untracked(args, report) -> None:
-    """A replay that tracked nothing says why, and what the video shows instead (arapp/engine/untracked.py)."""
+    """A replay that tracked nothing says why, and what the video shows instead (arapp/engine/untracked.py):
+    an anchor found in it is written to FOUND_ANCHORS in the output folder, for the next run's --anchors."""
     if not report.get("frames") or report.get("tracked_fraction"):
         return
     from arapp.engine.untracked import untracked_lines_for  # discovery's detectors: only for a replay that needs them
 
-    for line in untracked_lines_for(args.recording, args.calibration, args.anchors):
+    found = Path(args.out) / FOUND_ANCHORS
+    for line in untracked_lines_for(args.recording, args.calibration, args.anchors, found_file=found):
         print(f"replay: {line}")

@@ -14,10 +14,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from tracking.anchors.diagnose import suggestion_line, why_line
+from tracking.anchors.diagnose import suggestion_anchors, suggestion_line, why_line
 from tracking.anchors.discover import Discovery
 
 from arapp.engine.input_source import open_input
+from arapp.exchange.meshes import write_atomic
 
 SAMPLED_FRAMES = 8   # frames spread over the video: a board held up for a second of a minute is still met
 ENOUGH_FRAMES = 3    # once something is found in this many, the other sampled frames are not looked at
@@ -40,9 +41,12 @@ def sample_frames(video: str | Path, count: int = SAMPLED_FRAMES) -> list[np.nda
         cap.release()
 
 
-def untracked_lines(video: str | Path, anchors, default_anchors: bool = False, camera=None) -> list[str]:
+def untracked_lines(video: str | Path, anchors, default_anchors: bool = False, camera=None,
+                    found_file: str | Path | None = None) -> list[str]:
     """[why, suggestion] for a video in which `anchors` (AnchorSpecs) gave no pose; [] when they do give one
-    in the sampled frames (only checked when `camera` is given: a recording, not a finished replay)."""
+    in the sampled frames (only checked when `camera` is given: a recording, not a finished replay).
+    `found_file`: where to write the suggested anchor list (an `--anchors` file), which the suggestion then
+    names; None: the suggestion holds the JSON itself."""
     frames = sample_frames(video)
     if camera is not None and _anchors_give_a_pose(anchors, camera, frames):
         return []
@@ -54,7 +58,11 @@ def untracked_lines(video: str | Path, anchors, default_anchors: bool = False, c
     lines = [why_line(anchors, found, default_anchors)]
     suggestions = found.suggestions()
     if suggestions:
-        lines.append(suggestion_line(suggestions[0]))
+        written = None
+        if found_file is not None:
+            write_atomic(found_file, suggestion_anchors(suggestions[0]).encode())
+            written = str(found_file)
+        lines.append(suggestion_line(suggestions[0], written))
     return lines
 
 
@@ -68,12 +76,13 @@ def _anchors_give_a_pose(anchors, camera, frames) -> bool:
     return False
 
 
-def untracked_lines_for(recording: str | Path, calibration: str | None = None, anchors_file: str | None = None
-                        ) -> list[str]:
+def untracked_lines_for(recording: str | Path, calibration: str | None = None, anchors_file: str | None = None,
+                        found_file: str | Path | None = None) -> list[str]:
     """untracked_lines for what `arapp replay` was given: a recording folder or a plain video, with the anchors
-    it tracked (arapp.engine.input_source.open_input: `anchors_file`, else a recording's own, else the default)."""
+    it tracked (arapp.engine.input_source.open_input: `anchors_file`, else a recording's own, else the default);
+    `found_file` as there."""
     with open_input(recording, calibration=calibration, anchors=anchors_file, default_anchor_note=False) as opened:
         session = getattr(opened.source, "session", None)
         anchors, default = opened.anchors, opened.default_anchors
     video = session.video_path if session is not None else Path(recording)
-    return untracked_lines(video, anchors, default_anchors=default)
+    return untracked_lines(video, anchors, default_anchors=default, found_file=found_file)

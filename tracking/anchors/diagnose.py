@@ -202,9 +202,17 @@ def why_line(anchors: list[AnchorSpec], found: Discovery, default_anchors: bool 
     return "nothing tracked: " + "; ".join(why_untracked(anchors, found, default_anchors))
 
 
-def suggestion_line(s: Suggestion) -> str:
+def suggestion_line(s: Suggestion, written: str | None = None) -> str:
     """'found a 4x3 DICT_4X4_50 board (ids 0-11); with 40 mm markers (measure yours) use --anchors FILE
-    holding: [{...}]' for a discovery's suggestion."""
+    holding: [{...}]' for a discovery's suggestion; `written`: the path of a file that already holds that
+    anchor list (`suggestion_anchors`), named instead of the JSON."""
     size = "a 50 mm code" if s.kind == "qr" else f"{mm(DEFAULT_MARKER_M)} markers"
-    return (f"found {s.summary}; assuming {size} (measure yours and scale {s.size_field}), use --anchors FILE "
-            f"holding: {json.dumps([s.block])}")
+    head = f"found {s.summary}; assuming {size} (measure yours and scale {s.size_field})"
+    if written is not None:
+        return f"{head}, use --anchors {written} (written with that anchor)"
+    return f"{head}, use --anchors FILE holding: {json.dumps([s.block])}"
+
+
+def suggestion_anchors(s: Suggestion) -> str:
+    """The anchor list (JSON text, as `--anchors` files hold it) of a discovery's suggestion."""
+    return json.dumps([s.block], indent=2) + "\n"
