@@ -91,6 +91,12 @@ class DiscoveryStage:
         self.done.set()
         self._inbox.wake()
 
+    @property
+    def stopped(self) -> bool:
+        """Whether the stage looks at no frame now or later: finished and its thread ended (a look under way
+        when `finish` came runs to its end first), or never started."""
+        return self.done.is_set() and (self._thread is None or not self._thread.is_alive())
+
     # -- the stage's thread ------------------------------------------------------------------------
     def _run(self) -> None:
         while not self.done.is_set():

@@ -16,6 +16,7 @@ import numpy as np
 
 from tracking.anchors.diagnose import suggestion_anchors, suggestion_line, why_line
 from tracking.anchors.discover import Discovery
+from tracking.sources.images import image_files
 
 from arapp.engine.input_source import open_input
 from arapp.exchange.meshes import write_atomic
@@ -25,7 +26,13 @@ ENOUGH_FRAMES = 3    # once something is found in this many, the other sampled f
 
 
 def sample_frames(video: str | Path, count: int = SAMPLED_FRAMES) -> list[np.ndarray]:
-    """Up to `count` gray frames spread evenly over a video file (fewer when it has fewer or ends early)."""
+    """Up to `count` gray frames spread evenly over a video file or a folder of images (fewer when it has
+    fewer or ends early)."""
+    if Path(video).is_dir():
+        files = image_files(Path(video))
+        picks = sorted({int((k + 0.5) * len(files) / count) for k in range(count)}) if files else []
+        grays = (cv2.imread(str(files[i]), cv2.IMREAD_GRAYSCALE) for i in picks)
+        return [g for g in grays if g is not None]
     cap = cv2.VideoCapture(str(video))
     try:
         n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)

@@ -23,8 +23,9 @@ from arapp.gui.tasks import Task
 
 
 def ask_recording(parent) -> str | None:
-    """Ask for a recording folder; None when cancelled."""
-    folder = QFileDialog.getExistingDirectory(parent, "Open a recording folder", str(Path.cwd() / "recordings"))
+    """Ask for a recording folder (or a folder of images, played as frames); None when cancelled."""
+    folder = QFileDialog.getExistingDirectory(parent, "Open a recording folder or a folder of images",
+                                              str(Path.cwd() / "recordings"))
     return folder or None
 
 

@@ -42,6 +42,7 @@ DEFAULT_MARKER_M = 0.04
 LOOKED_FOR_IDS = 250
 MIN_BOARD_MARKERS = 4          # fewer markers do not pin a board's layout
 FIT_TOLERANCE = 0.12           # a layout fits when marker centres land within this fraction of a marker side
+UPRIGHT_COS = 0.7              # a marker axis within 45 degrees of its layout axis counts as upright (cos)
 
 
 def first_markers(family: str, n: int) -> cv2.aruco.Dictionary:
@@ -300,11 +301,27 @@ def _fit(grid: np.ndarray, quads: np.ndarray) -> tuple[float, np.ndarray | None]
     return float((np.linalg.norm(p - centres, axis=1) / side).max()), H
 
 
+def _in_layout(H: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    """The quads' (N,4,2) pixel corners in layout units, through the inverse of H (layout -> pixels)."""
+    p = np.c_[quads.reshape(-1, 2), np.ones(quads.size // 2)] @ np.linalg.inv(H).T
+    return (p[:, :2] / p[:, 2:3]).reshape(-1, 4, 2)
+
+
+def _upright(H: np.ndarray, quads: np.ndarray) -> bool:
+    """Whether the markers stand in the layout as OpenCV's boards print them: each marker's own x axis (its
+    corner 0 -> 1) along the layout's +x and its y axis (corner 1 -> 2) along +y (rows downward). Ids that
+    fit a grid turned or mirrored against the markers (a sheet of tags numbered up its columns) are no
+    OpenCV board: no pose fits them, however well their centres line up (a homography may mirror)."""
+    q = _in_layout(H, quads)
+    ax, ay = q[:, 1] - q[:, 0], q[:, 2] - q[:, 1]
+    cos_x = ax[:, 0] / np.maximum(np.linalg.norm(ax, axis=1), 1e-12)
+    cos_y = ay[:, 1] / np.maximum(np.linalg.norm(ay, axis=1), 1e-12)
+    return bool(np.median(cos_x) > UPRIGHT_COS and np.median(cos_y) > UPRIGHT_COS)
+
+
 def _marker_fraction(H: np.ndarray, quads: np.ndarray) -> float:
     """The markers' median side in layout units (the layout's pitch is 1), through the inverse homography."""
-    Hi = np.linalg.inv(H)
-    p = np.c_[quads.reshape(-1, 2), np.ones(quads.size // 2)] @ Hi.T
-    q = (p[:, :2] / p[:, 2:3]).reshape(-1, 4, 2)
+    q = _in_layout(H, quads)
     return float(np.median(np.linalg.norm(q - np.roll(q, -1, axis=1), axis=2)))
 
 
@@ -321,7 +338,8 @@ def board_from_markers(family: str, polarity: str, ids: np.ndarray, quads: np.nd
 
     Every markers_x (GridBoard: id k at column k % x, row k // x) and squares_x (ChArUco: id k in the k-th
     white square) is tried; the one whose homography puts every marker centre within FIT_TOLERANCE marker
-    sides of its place wins (the fewest columns on a tie). Its rows are as many as the highest id needs."""
+    sides of its place, with the markers upright in it (`_upright`), wins (the fewest columns on a tie). Its
+    rows are as many as the highest id needs."""
     ids = np.asarray(ids, int)
     if len(ids) < MIN_BOARD_MARKERS or len(set(ids.tolist())) != len(ids):
         return None
@@ -332,14 +350,14 @@ def board_from_markers(family: str, polarity: str, ids: np.ndarray, quads: np.nd
     for x in range(2, top + 2):
         grid = np.c_[ids % x, ids // x].astype(float)
         err, H = _fit(grid, quads)
-        if err < FIT_TOLERANCE and (best is None or err < best[0] - 0.02):
+        if err < FIT_TOLERANCE and (best is None or err < best[0] - 0.02) and _upright(H, quads):
             best = (err, "aruco_board", x, -(-(top + 1) // x), H)
     for sx in range(3, 2 * top + 4):
         sy = 2
         while (sx * sy) // 2 < top + 1:
             sy += 1
         err, H = _fit(_charuco_centres(sx, sy)[ids], quads)
-        if err < FIT_TOLERANCE and (best is None or err < best[0] - 0.02):
+        if err < FIT_TOLERANCE and (best is None or err < best[0] - 0.02) and _upright(H, quads):
             best = (err, "charuco", sx, sy, H)
     if best is None:
         return None

@@ -1,7 +1,7 @@
 """Source specs and the one table of schemes that open them.
 
 A spec is `SCHEME:TARGET[?calibration=CAM.yaml]`, or a plain path (the `file`
-scheme): `recordings/board_orbit`, `file:clip.mp4?calibration=cam.yaml`,
+scheme): `recordings/board_orbit`, `file:clip.mp4?calibration=cam.yaml`, `photos/` (a folder of images),
 `v4l2:0`, `v4l2:/dev/video2`, `depthai`, `depthai:<device id>`.
 `parse_spec` is the one parser (CLI and GUI); `open_source` opens what a spec
 names through its scheme's row in `SCHEMES`.
@@ -19,9 +19,10 @@ from pathlib import Path
 from typing import Callable
 from urllib.parse import parse_qsl
 
-from tracking.errors import SourceError
+from tracking.errors import SessionError, SourceError
 
 from .base import Source
+from .images import IMAGE_SUFFIXES, ImageFolderSource, image_files
 from .oak import DepthAISource, list_depthai
 from .recording import RecordingSource
 from .v4l2 import V4L2Source, list_v4l2
@@ -46,10 +47,17 @@ class SourceOptions:
 
 
 def _open_file(target: str, options: SourceOptions) -> Source:
-    """A recording folder (or its session.json) as a RecordingSource, a video file as a VideoFileSource."""
+    """A recording folder (or its session.json) as a RecordingSource, a folder of images without session.json
+    as an ImageFolderSource, a video file as a VideoFileSource."""
     path = Path(target)
     if path.name == "session.json" and path.is_file():
         path = path.parent
+    if path.is_dir() and not (path / "session.json").exists():
+        if not image_files(path):
+            raise SessionError(f"{path}: no session.json, so not a recording folder, and no images "
+                               f"({', '.join(s[1:] for s in IMAGE_SUFFIXES)}) to play as frames; give a recording "
+                               "folder, a video or a folder of images")
+        return ImageFolderSource(path, options.calibration, options.fps)
     if path.is_dir():
         if options.calibration is not None:
             raise SourceError(f"{path}: a recording carries its own camera in session.json; drop --calibration")
@@ -95,8 +103,8 @@ class Scheme:
 
 # The registry: one row per scheme (the first is the default for plain paths).
 SCHEMES: dict[str, Scheme] = {s.name: s for s in (
-    Scheme("file", _open_file, RecordingSource.live, "a recording folder or video file (optionally 'file:PATH', "
-           "a video with '?calibration=CAM.yaml')"),
+    Scheme("file", _open_file, RecordingSource.live, "a recording folder, video file or folder of images "
+           "(optionally 'file:PATH', a video or images with '?calibration=CAM.yaml')"),
     Scheme("v4l2", _open_v4l2, V4L2Source.live, "'v4l2:0', 'v4l2:/dev/video2'", target_name="a device",
            devices=_v4l2_devices),
     Scheme("depthai", _open_depthai, DepthAISource.live, "'depthai' or 'depthai:<device id>'",

@@ -1,0 +1,113 @@
+"""A folder of images plays as a video in every command (tracking/sources/images.py), and anchor discovery
+does not offer a board that no pose can fit (tracking/anchors/discover.py `_upright`).
+
+Oracles: the real clipboard photos (tests/data/realvideo/SOURCES.md: 30 AprilTags 36h11, numbered up
+their columns, so no OpenCV GridBoard) with OpenCV's own detector on each photo; images written by the test
+with known grey levels and sizes; OpenCV's GridBoard corner order (corner 0 -> 1 along the board's x).
+"""
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from arapp.cli import main
+from tracking.anchors.discover import Discovery, board_from_markers
+from tracking.errors import SessionError
+from tracking.sources import ImageFolderSource, open_source
+
+CLIPBOARD = Path(__file__).resolve().parent / "data" / "realvideo" / "apriltag_clipboard"
+
+
+def test_images_play_in_natural_name_order_at_30_fps(tmp_path):
+    for name, grey in (("img10.png", 100), ("img2.png", 20), ("img1.png", 10), ("notes.txt", None)):
+        if grey is None:
+            (tmp_path / name).write_text("not an image")
+        else:
+            cv2.imwrite(str(tmp_path / name), np.full((24, 32), grey, np.uint8))
+    with open_source(str(tmp_path)) as src:
+        assert isinstance(src, ImageFolderSource)
+        frames = list(src)
+        assert src.error is None
+        assert src.notes == [f"image folder {tmp_path} (3 images): played at 30 fps (a folder of images has no "
+                             "frame rate)"]
+    assert [int(f.image[0, 0, 0]) for f in frames] == [10, 20, 100]   # img1, img2, img10: not name order
+    assert [f.t for f in frames] == pytest.approx([0.0, 1 / 30, 2 / 30])
+    assert all(f.image.shape == (24, 32, 3) for f in frames)
+
+
+def test_an_image_of_another_size_ends_the_stream_saying_which(tmp_path):
+    cv2.imwrite(str(tmp_path / "a.png"), np.zeros((24, 32), np.uint8))
+    cv2.imwrite(str(tmp_path / "b.png"), np.zeros((24, 32), np.uint8))
+    cv2.imwrite(str(tmp_path / "c.png"), np.zeros((30, 40), np.uint8))
+    with pytest.warns(RuntimeWarning):
+        with open_source(str(tmp_path)) as src:
+            frames = list(src)
+    assert len(frames) == 2
+    assert src.error == (f"{tmp_path / 'c.png'}: 40x30, but the folder's first image is 32x24; frames 0..1 were "
+                         "delivered (every image must have one size)")
+
+
+def test_a_folder_without_images_or_session_says_both(tmp_path):
+    (tmp_path / "readme.txt").write_text("x")
+    with pytest.raises(SessionError, match="no session.json, so not a recording folder, and no images"):
+        open_source(str(tmp_path))
+
+
+def _opencv_sees(frames_dir: Path, dictionary: str, marker_id: int) -> list[bool]:
+    det = cv2.aruco.ArucoDetector(cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, dictionary)))
+    out = []
+    for f in sorted(frames_dir.glob("*.png")):
+        _c, ids, _r = det.detectMarkers(cv2.imread(str(f), cv2.IMREAD_GRAYSCALE))
+        out.append(ids is not None and marker_id in ids.ravel().tolist())
+    return out
+
+
+def test_replay_of_the_clipboard_photos_offers_a_tag_that_then_tracks(tmp_path, capsys):
+    frames = CLIPBOARD / "frames"
+    assert main(["replay", str(frames), "--out", str(tmp_path / "a"), "--no-video", "--no-slam"]) == 0
+    out = capsys.readouterr().out
+    assert f"image folder {frames} (10 images): played at 30 fps" in out
+    # the tags are numbered up the sheet's columns: their centres fit a 5-column grid, but turned against the
+    # markers, which no OpenCV board is; a lone tag is offered instead of a board no pose fits
+    (found,) = json.loads((tmp_path / "a" / "anchors-found.json").read_text())
+    assert found["kind"] == "aruco" and found["dictionary"] == "DICT_APRILTAG_36h11"
+    assert main(["replay", str(frames), "--anchors", str(tmp_path / "a" / "anchors-found.json"),
+                 "--out", str(tmp_path / "b"), "--no-video", "--no-slam"]) == 0
+    states = [line.split(",")[2] for line in (tmp_path / "b" / "tracking.csv").read_text().splitlines()[1:]]
+    seen = _opencv_sees(frames, found["dictionary"], found["id"])
+    assert sum(seen) >= 8   # the tag offered is one OpenCV sees in most photos
+    assert all(state == "marker" for state, s in zip(states, seen) if s)
+
+
+def _grid_quads(nx: int, ny: int, side: float = 30.0, pitch: float = 40.0) -> np.ndarray:
+    """Pixel corners of an nx x ny grid of upright markers, ids row by row from the top left, in OpenCV's
+    corner order (0 top-left, 1 top-right, 2 bottom-right, 3 bottom-left), as a GridBoard seen head-on."""
+    quads = []
+    for k in range(nx * ny):
+        x, y = 50 + pitch * (k % nx), 60 + pitch * (k // nx)
+        quads.append([[x, y], [x + side, y], [x + side, y + side], [x, y + side]])
+    return np.array(quads, float)
+
+
+def test_a_grid_of_turned_markers_is_no_board():
+    quads = _grid_quads(4, 3)
+    board = board_from_markers("DICT_4X4_1000", "normal", np.arange(12), quads)
+    assert board is not None and (board.block["markers_x"], board.block["markers_y"]) == (4, 3)
+    # the same centres with every marker turned half round (corner 0 at the bottom right): ids that run
+    # against the markers' own axes, as on a sheet numbered the other way
+    turned = np.roll(quads, 2, axis=1)
+    assert board_from_markers("DICT_4X4_1000", "normal", np.arange(12), turned) is None
+    # mirrored (corners in the other sense): no pose turns a board into its mirror image
+    mirrored = quads[:, ::-1]
+    assert board_from_markers("DICT_4X4_1000", "normal", np.arange(12), mirrored) is None
+
+
+def test_discovery_on_the_clipboard_suggests_no_board():
+    found = Discovery()
+    for f in sorted((CLIPBOARD / "frames").glob("*.png"))[:4]:
+        found.look_all(cv2.imread(str(f), cv2.IMREAD_GRAYSCALE))
+    kinds = {s.kind for s in found.suggestions()}
+    assert kinds == {"aruco"}
