@@ -99,7 +99,7 @@ FILE_SECONDS = {
     "test_gui_firsthour_window.py": 17, "test_scan_depth.py": 16, "test_scan.py": 16, "test_any_video.py": 16,
     "test_moonraker_server.py": 15, "test_slicer.py": 14, "test_pixel_convention.py": 14, "test_anchors.py": 14,
     "test_octoprint_server.py": 13, "test_render.py": 12, "test_anchor_border_jitter.py": 10,
-    "test_saved_scenes.py": 9, "test_calibration_quality.py": 9, "test_anchor_polarity.py": 9,
+    "test_saved_scenes.py": 9, "test_image_folder.py": 9, "test_calibration_quality.py": 9, "test_anchor_polarity.py": 9,
     "test_anchor_discovery.py": 9, "test_synth_camera.py": 7, "test_sources.py": 7, "test_gui_calibration.py": 7,
     "test_untracked.py": 5, "test_scan_session.py": 5, "test_octoprint_link.py": 5, "test_occlusion.py": 5,
     "test_link_cli.py": 5, "test_filter_reentry.py": 5, "test_gui_workers.py": 4, "test_gui_print_resume.py": 4,

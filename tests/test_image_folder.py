@@ -38,6 +38,16 @@ def test_images_play_in_natural_name_order_at_30_fps(tmp_path):
     assert all(f.image.shape == (24, 32, 3) for f in frames)
 
 
+def test_16_bit_and_grey_images_come_as_8_bit_colour(tmp_path):
+    cv2.imwrite(str(tmp_path / "a.png"), np.full((24, 32), 40000, np.uint16))   # 16-bit grey
+    cv2.imwrite(str(tmp_path / "b.png"), np.full((24, 32, 4), 7, np.uint8))     # with alpha
+    with open_source(str(tmp_path)) as src:
+        frames = list(src)
+    assert [f.image.dtype for f in frames] == [np.uint8, np.uint8]
+    assert [f.image.shape for f in frames] == [(24, 32, 3), (24, 32, 3)]
+    assert int(frames[0].image[0, 0, 0]) == 40000 >> 8 and int(frames[1].image[0, 0, 0]) == 7
+
+
 def test_an_image_of_another_size_ends_the_stream_saying_which(tmp_path):
     cv2.imwrite(str(tmp_path / "a.png"), np.zeros((24, 32), np.uint8))
     cv2.imwrite(str(tmp_path / "b.png"), np.zeros((24, 32), np.uint8))

@@ -2,7 +2,9 @@
 
 The images are the folder's own files whose suffix is in IMAGE_SUFFIXES, in natural name order
 (`frame2.png` before `frame10.png`), at frame / fps seconds (30 fps unless given: a folder carries no
-frame rate, which a note says). Every image must have the first one's size.
+frame rate, which a note says). Every image must have the first one's size. Images are read as 8-bit
+colour as stored, their EXIF orientation ignored: every photo as the sensor took it, so one camera (one
+calibration) fits them all, portrait or landscape.
 """
 
 from __future__ import annotations
@@ -16,10 +18,11 @@ import cv2
 from tracking.camera import Camera
 from tracking.errors import SourceError
 
-from .base import Frame, Source, _as_bgr, _fit_camera
+from .base import Frame, Source, _fit_camera
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 DEFAULT_FPS = 30.0
+READ_FLAGS = cv2.IMREAD_COLOR | cv2.IMREAD_IGNORE_ORIENTATION   # 8-bit BGR (16-bit PNGs scaled), as stored
 
 
 def natural_key(name: str) -> list:
@@ -46,7 +49,7 @@ class ImageFolderSource(Source):
         self.files = image_files(self.path)
         if not self.files:
             raise SourceError(f"{self.path}: no images ({', '.join(s[1:] for s in IMAGE_SUFFIXES)}) in this folder")
-        first = cv2.imread(str(self.files[0]), cv2.IMREAD_UNCHANGED)
+        first = cv2.imread(str(self.files[0]), READ_FLAGS)
         if first is None:
             raise SourceError(f"{self.files[0]}: OpenCV cannot read this image (corrupt file or unsupported "
                               "format); remove it from the folder or convert it")
@@ -71,7 +74,7 @@ class ImageFolderSource(Source):
         for i, path in enumerate(self.files):
             if self.closed:
                 return
-            img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+            img = cv2.imread(str(path), READ_FLAGS)
             if img is None:
                 self._fail(f"{path}: OpenCV cannot read this image; frames 0..{i - 1} were delivered")
                 return
@@ -80,4 +83,4 @@ class ImageFolderSource(Source):
                            f"{self.width}x{self.height}; frames 0..{i - 1} were delivered (every image must have "
                            "one size)")
                 return
-            yield Frame(i, i / self.fps, _as_bgr(img))
+            yield Frame(i, i / self.fps, img)
