@@ -69,7 +69,7 @@ def run(args) -> int:
         _views_from_images(args, col, consider)
     else:
         _views_from_source(args, col, consider)
-    print(f"rejected: {col.rejected}")
+    print("rejected: " + ", ".join(f"{n} {why}" for why, n in col.rejected.items()))
     guess = _guess(args, col) if args.calibration and col.views else None
     res = solve(col.views, col.width, col.height, col.coverage, min_views=args.min_views, guess=guess)
     print(res.report(names))
