@@ -5,6 +5,7 @@ RATE_HZ frames a second); recordings/board_orbit's session.json for what its fra
 """
 
 import json
+import time
 
 import cv2
 import numpy as np
@@ -81,3 +82,41 @@ def test_a_source_with_its_own_anchors_gets_the_why_only(frame):
     (offer,) = got
     assert offer["block"] is None and offer["summary"] is None
     assert "DICT_4X4 ids 0-11" in offer["why"]
+
+
+def test_a_clip_that_ends_before_the_lost_window_gets_its_last_frame_looked_at(frame, truth):
+    # a few photos, or a clip shorter than LOST_BEFORE_S: without a look at the end the view would end on
+    # "lost" without a word
+    clock, got = Clock(), []
+    stage = DiscoveryStage(parse_anchors(DEFAULT_ANCHORS), got.append, default_anchors=True, after_s=1.0, clock=clock)
+    for t in (0.0, 0.1, 0.2):
+        clock.t = t
+        stage.observe(frame, None)
+    assert stage._thread is None   # inside the lost window: nothing looked at
+    stage.at_end()
+    stage.at_end()   # (said twice: looked at once)
+    deadline = time.monotonic() + 20.0
+    while not got and time.monotonic() < deadline:
+        time.sleep(0.02)
+    stage.finish()
+    (offer,) = got
+    assert offer["block"]["dictionary"] == truth["dictionary"]
+    assert (offer["block"]["markers_x"], offer["block"]["markers_y"]) == (truth["markers_x"], truth["markers_y"])
+    assert stage._inbox.put_count == 1
+
+
+def test_the_end_adds_no_look_after_a_pose_or_after_looking(frame):
+    clock = Clock()
+    tracked = DiscoveryStage(parse_anchors(DEFAULT_ANCHORS), lambda d: None, clock=clock)
+    tracked.observe(frame, None)
+    tracked.observe(frame, np.eye(4))
+    tracked.at_end()
+    assert tracked._inbox.put_count == 0
+    looked = DiscoveryStage(parse_anchors(DEFAULT_ANCHORS), lambda d: None, after_s=1.0, clock=clock)
+    looked._run = lambda: None
+    for t in (0.0, 1.0):
+        clock.t = t
+        looked.observe(frame, None)
+    assert looked._inbox.put_count == 1
+    looked.at_end()
+    assert looked._inbox.put_count == 1

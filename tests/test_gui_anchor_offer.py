@@ -92,3 +92,30 @@ def test_not_now_stops_looking(threads_window, qtbot, clip, monkeypatch):
     qtbot.wait(600)
     assert stage.fed == fed and not bar.isVisible()
     assert source_anchors.remembered(str(clip)) is None
+
+
+@pytest.fixture(scope="module")
+def short_clip(tmp_path_factory, repo_root):
+    """Eight frames of recordings/board_orbit (a quarter of a second: it ends before discovery's lost window)."""
+    path = tmp_path_factory.mktemp("short") / "short.mp4"
+    cap = cv2.VideoCapture(str(repo_root / "recordings" / "board_orbit" / "video.avi"))
+    writer = None
+    for _ in range(8):
+        ok, f = cap.read()
+        assert ok
+        if writer is None:
+            writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 30.0, (f.shape[1], f.shape[0]))
+        writer.write(f)
+    writer.release()
+    return path
+
+
+def test_a_clip_that_ends_before_the_lost_window_still_gets_the_offer(threads_window, qtbot, short_clip, repo_root):
+    # LOST_BEFORE_S as shipped (1 s): the clip is over before discovery would start; its end looks instead
+    w = threads_window
+    truth = json.loads((repo_root / "recordings" / "board_orbit" / "session.json").read_text())["anchors"][0]
+    w.open_source(str(short_clip))
+    bar = w.anchor_offer.bar
+    qtbot.waitUntil(lambda: bar.isVisible(), timeout=20000)
+    assert not w.session.playing   # at the end of the clip, standing still
+    assert f"{truth['markers_x']}x{truth['markers_y']} {truth['dictionary']}" in bar.label.text()

@@ -6,7 +6,9 @@ tracking.anchors.discover.Discovery.feed on it (a couple of dictionary-family pa
 and publishes what it found as a plain dict (`offer_dict`) into the engine's per-frame state
 (`LiveEngine.state["discovery"]`), which reaches the app model with every frame in both engine hosts (the
 thread engine and the child process). The stage stops for good once the anchors give a pose or the offer
-is answered (commands.EndDiscovery). No Qt.
+is answered (commands.EndDiscovery). A recording that ends before discovery looked at anything (a clip
+shorter than `after_s`, a few photos) and never gave a pose has its last frame looked at with every pass
+(`at_end`), so the user learns why, as `arapp replay` says it. No Qt.
 """
 
 from __future__ import annotations
@@ -63,6 +65,7 @@ class DiscoveryStage:
         self._last: tuple | None = None
         self.done = threading.Event()
         self.fed = 0
+        self._newest = None   # the last frame observed without a pose (a reference), for `at_end`
         self._thread: threading.Thread | None = None
 
     # -- processing thread -------------------------------------------------------------------------
@@ -73,6 +76,7 @@ class DiscoveryStage:
         if world_from_camera is not None:
             self.finish()   # the anchors are in view: nothing to discover
             return
+        self._newest = image
         now = self.clock()
         if self._lost_since is None:
             self._lost_since = now
@@ -81,10 +85,21 @@ class DiscoveryStage:
         if self._last_fed is not None and now - self._last_fed < 1.0 / self.rate_hz:
             return
         self._last_fed = now
+        self._hand_over(image, now, every_pass=False)
+
+    def at_end(self) -> None:
+        """The recording reached its end (capture thread): if nothing was looked at yet and no pose was found,
+        look at the last frame observed with every pass (`Discovery.look_all`)."""
+        if self.done.is_set() or self._newest is None or self._last_fed is not None:
+            return
+        self._last_fed = self.clock()
+        self._hand_over(self._newest, self._last_fed, every_pass=True)
+
+    def _hand_over(self, image, now: float, every_pass: bool) -> None:
         if self._thread is None:
             self._thread = threading.Thread(target=self._run, name="arapp-discovery", daemon=True)
             self._thread.start()
-        self._inbox.put((image, now))
+        self._inbox.put((image, now, every_pass))
 
     def finish(self) -> None:
         """Stop looking for good (anchors tracked, offer answered, engine stopping)."""
@@ -103,17 +118,19 @@ class DiscoveryStage:
             got = self._inbox.take(timeout=0.5)
             if got is None or self.done.is_set():
                 continue
-            image, t = got
+            image, t, every_pass = got
             try:
-                self.look(image, t)
+                self.look(image, t, every_pass)
             except cv2.error:
                 self.finish()   # a frame OpenCV cannot read: no offer, and the view goes on as it was
 
-    def look(self, image, t: float) -> None:
-        """Feed one frame to Discovery and publish when the finding changed (the stage's thread; tests call
-        it directly)."""
+    def look(self, image, t: float, every_pass: bool = False) -> None:
+        """Feed one frame to Discovery (`every_pass`: all its passes at once, else its rate and round-robin)
+        and publish when the finding changed (the stage's thread; tests call it directly)."""
         gray = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
-        if not self.discovery.feed(gray, t):
+        if every_pass:
+            self.discovery.look_all(gray)
+        elif not self.discovery.feed(gray, t):
             return
         self.fed += 1
         found = self.discovery.suggestions() if self.offer else []

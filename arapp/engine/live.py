@@ -163,7 +163,7 @@ class LiveEngine:
         self._toolpaths_lock = threading.Lock()
         self.player = Player(opener or (lambda: open_spec(spec)), self.captured, speed=speed, loop=loop,
                              playing=False, on_demand=on_demand, on_open=self._opened,
-                             on_error=self.events.error.emit, on_end=self.events.ended.emit)
+                             on_error=self.events.error.emit, on_end=self._ended)
         self.player._steps = 1  # the first frame, before play
 
     # -- lifecycle ---------------------------------------------------------------------
@@ -185,7 +185,7 @@ class LiveEngine:
                                   on_ready=self._ready, on_error=self.events.error.emit,
                                   skipped=lambda: self.player.skipped, wrap=self.wrap,
                                   display_buffer=self.display_buffer)
-            self.discovery = DiscoveryStage(info.anchors, lambda d: self.state.__setitem__("discovery", d),
+            self.discovery = DiscoveryStage(info.anchors, self._discovered,
                                             default_anchors=_are_default(info.anchors),
                                             offer=not getattr(getattr(source, "session", None), "anchors", None))
             processor.watch = self.discovery.observe
@@ -193,6 +193,13 @@ class LiveEngine:
         if info.live and self.autoplay:
             self.player.play()  # a camera does not wait
         self.events.opened.emit(info)
+
+    def _ended(self) -> None:
+        """Capture thread: the recording reached its end (no loop). A clip too short for anchor discovery to
+        have looked at it, and never tracked, gets its last frame looked at now."""
+        if self.discovery is not None:
+            self.discovery.at_end()
+        self.events.ended.emit()
 
     def _ready(self) -> None:
         if not self.first_ready:
@@ -255,6 +262,13 @@ class LiveEngine:
     def submit(self, fn: Callable[[Any], None]) -> None:
         """Run fn(pipeline) in the processing thread between frames (queued until the pipeline exists)."""
         self.stage.submit(fn)
+
+    def _discovered(self, offer: dict) -> None:
+        """Discovery's thread: a new finding, carried to the app model with the next frame shown; while
+        playback stands still (the end of a recording) the last frame is shown again to carry it."""
+        self.state["discovery"] = offer
+        if not self.player.playing:
+            self.submit(lambda pipeline: None)
 
     def end_discovery(self) -> None:
         """Stop anchor discovery (its offer was answered, or the engine stops)."""
