@@ -213,3 +213,21 @@ def held_recording_folder(name: str):
 def held_recording(name: str, frames: slice | None = None):
     """`load_recording` of the held-card recording `name` (rendered and cached by `held_recording_folder`)."""
     return load_recording(held_recording_folder(name), frames)
+
+
+def plain_clip(source_video, path, frames: int, fps: float = 30.0):
+    """The first `frames` frames of `source_video` written to `path` as a plain MP4 (no session.json beside it:
+    what a user has), returned."""
+    import cv2
+
+    cap = cv2.VideoCapture(str(source_video))
+    writer = None
+    for _ in range(frames):
+        ok, f = cap.read()
+        assert ok, f"{source_video}: fewer than {frames} frames"
+        if writer is None:
+            writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (f.shape[1], f.shape[0]))
+        writer.write(f)
+    writer.release()
+    cap.release()
+    return path

@@ -6,12 +6,12 @@ Oracles: recordings/board_orbit's session.json (its video shows a 4x3 DICT_4X4_5
 
 import json
 
-import cv2
 import pytest
 from PySide6.QtCore import Qt
 
 from arapp.engine import discovery
 from arapp.app import source_anchors
+from scenes import plain_clip
 
 N_FRAMES = 75   # 2.5 s: a plain video does not loop, and the hint shows after 1 s of being lost
 
@@ -19,17 +19,8 @@ N_FRAMES = 75   # 2.5 s: a plain video does not loop, and the hint shows after 1
 @pytest.fixture(scope="module")
 def clip(tmp_path_factory, repo_root):
     """A plain video cut from recordings/board_orbit (no session.json: the app's default anchors are looked for)."""
-    path = tmp_path_factory.mktemp("clip") / "clip.mp4"
-    cap = cv2.VideoCapture(str(repo_root / "recordings" / "board_orbit" / "video.avi"))
-    writer = None
-    for _ in range(N_FRAMES):
-        ok, f = cap.read()
-        assert ok
-        if writer is None:
-            writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 30.0, (f.shape[1], f.shape[0]))
-        writer.write(f)
-    writer.release()
-    return path
+    return plain_clip(repo_root / "recordings" / "board_orbit" / "video.avi",
+                      tmp_path_factory.mktemp("clip") / "clip.mp4", N_FRAMES)
 
 
 def test_offer_found_used_tracks_and_is_remembered(threads_window, qtbot, clip, repo_root, monkeypatch):
@@ -97,17 +88,8 @@ def test_not_now_stops_looking(threads_window, qtbot, clip, monkeypatch):
 @pytest.fixture(scope="module")
 def short_clip(tmp_path_factory, repo_root):
     """Eight frames of recordings/board_orbit (a quarter of a second: it ends before discovery's lost window)."""
-    path = tmp_path_factory.mktemp("short") / "short.mp4"
-    cap = cv2.VideoCapture(str(repo_root / "recordings" / "board_orbit" / "video.avi"))
-    writer = None
-    for _ in range(8):
-        ok, f = cap.read()
-        assert ok
-        if writer is None:
-            writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 30.0, (f.shape[1], f.shape[0]))
-        writer.write(f)
-    writer.release()
-    return path
+    return plain_clip(repo_root / "recordings" / "board_orbit" / "video.avi",
+                      tmp_path_factory.mktemp("short") / "short.mp4", 8)
 
 
 def test_a_clip_that_ends_before_the_lost_window_still_gets_the_offer(threads_window, qtbot, short_clip, repo_root):
