@@ -16,6 +16,7 @@ import pytest
 from tracking.anchors.diagnose import suggestion_line, why_line, why_untracked
 from tracking.anchors.discover import Discovery, board_from_markers
 from tracking.anchors.render import look_at, render_view
+from scenes import plain_clip
 from tracking.camera import Camera
 from tracking.recording.schema import load_session, parse_anchors
 
@@ -42,18 +43,8 @@ def frames_of(path, count):
 @pytest.fixture(scope="module")
 def orbit_clip(tmp_path_factory):
     """A plain video (no session.json) cut from recordings/board_orbit, as a user would have one."""
-    path = tmp_path_factory.mktemp("clip") / "clip.mp4"
-    cap = cv2.VideoCapture(str(REPO / "recordings" / "board_orbit" / "video.avi"))
-    writer = None
-    for _ in range(45):
-        ok, f = cap.read()
-        if not ok:
-            break
-        if writer is None:
-            writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 30.0, (f.shape[1], f.shape[0]))
-        writer.write(f)
-    writer.release()
-    return path
+    return plain_clip(REPO / "recordings" / "board_orbit" / "video.avi",
+                      tmp_path_factory.mktemp("clip") / "clip.mp4", 45)
 
 
 @pytest.fixture(scope="module")

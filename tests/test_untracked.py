@@ -6,25 +6,17 @@ board), and a replay with the suggested anchors that tracks the clip.
 
 import json
 
-import cv2
 import pytest
 
 from arapp.cli import main
+from scenes import plain_clip
 
 
 @pytest.fixture(scope="module")
 def clip(tmp_path_factory, repo_root):
     """A plain video cut from recordings/board_orbit (no session.json: the default anchor is looked for)."""
-    path = tmp_path_factory.mktemp("clip") / "clip.mp4"
-    cap = cv2.VideoCapture(str(repo_root / "recordings" / "board_orbit" / "video.avi"))
-    writer = None
-    for _ in range(20):
-        ok, f = cap.read()
-        if writer is None:
-            writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 30.0, (f.shape[1], f.shape[0]))
-        writer.write(f)
-    writer.release()
-    return path
+    return plain_clip(repo_root / "recordings" / "board_orbit" / "video.avi",
+                      tmp_path_factory.mktemp("clip") / "clip.mp4", 20)
 
 
 def _lines(capsys, prefix):
