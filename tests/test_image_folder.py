@@ -121,3 +121,22 @@ def test_discovery_on_the_clipboard_suggests_no_board():
         found.look_all(cv2.imread(str(f), cv2.IMREAD_GRAYSCALE))
     kinds = {s.kind for s in found.suggestions()}
     assert kinds == {"aruco"}
+
+
+def test_anchors_without_their_place_are_said(tmp_path, capsys):
+    # the contract (docs/recording-format.md): every anchor after the first carries world_from_anchor; a list
+    # of tags without it (the clipboard's anchors.json) is tracked as if they all lay on the first: said once
+    anchors = CLIPBOARD / "anchors.json"
+    assert main(["replay", str(CLIPBOARD / "frames"), "--anchors", str(anchors), "--out", str(tmp_path / "a"),
+                 "--no-video", "--no-slam", "--frames", "2"]) == 0
+    said = [ln for ln in capsys.readouterr().out.splitlines() if "world_from_anchor" in ln]
+    assert said == [f"replay: {anchors}: anchors[1], anchors[2], anchors[3], ... (29 of 30) have no world_from_anchor, "
+                    "so each is taken to lie where the first anchor does; give each its place in the first one's "
+                    "frame, or track one at a time (docs/recording-format.md)"]
+    placed = json.loads(anchors.read_text())
+    for i, block in enumerate(placed[1:3], start=1):
+        block["world_from_anchor"] = [[1, 0, 0, 0.04 * i], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+    (tmp_path / "two.json").write_text(json.dumps(placed[:3]))
+    assert main(["replay", str(CLIPBOARD / "frames"), "--anchors", str(tmp_path / "two.json"), "--out",
+                 str(tmp_path / "b"), "--no-video", "--no-slam", "--frames", "2"]) == 0
+    assert not [ln for ln in capsys.readouterr().out.splitlines() if "world_from_anchor" in ln]

@@ -66,6 +66,18 @@ def describe_anchors(anchors: list[AnchorSpec]) -> str:
     return "; ".join(a.anchor_kind.describe(a) for a in anchors)
 
 
+def unplaced_notes(blocks: list, where: str) -> list[str]:
+    """The line for an anchors file whose anchors after the first lack `world_from_anchor` (docs/recording-
+    format.md: every other anchor carries its place in the first one's world); [] when all have it."""
+    unplaced = [i for i, b in enumerate(blocks) if i > 0 and isinstance(b, dict) and "world_from_anchor" not in b]
+    if not unplaced:
+        return []
+    named = ", ".join(f"anchors[{i}]" for i in unplaced[:3]) + (", ..." if len(unplaced) > 3 else "")
+    return [f"{where}: {named} ({len(unplaced)} of {len(blocks)}) have no world_from_anchor, so each is taken to "
+            "lie where the first anchor does; give each its place in the first one's frame, or track one at a "
+            "time (docs/recording-format.md)"]
+
+
 def open_input(spec, calibration: str | None = None, anchors: str | None = None, realtime: bool = False,
                width: int | None = None, height: int | None = None, fps: float | None = None,
                default_anchor_note: bool = True) -> Input:
@@ -89,6 +101,7 @@ def open_input(spec, calibration: str | None = None, anchors: str | None = None,
         source.camera  # noqa: B018 - a source that still has no camera says so here, before any output
         session = getattr(source, "session", None)
         if parsed is not None:
+            notes += unplaced_notes(blocks, anchors)
             if session is not None:
                 notes.append(f"tracking the anchors of {anchors} ({describe_anchors(parsed)}) instead of the "
                              "recording's own")
