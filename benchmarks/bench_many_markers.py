@@ -51,6 +51,8 @@ class PlainTags:
         self.det = {d: cv2.aruco.ArucoDetector(aruco_dictionary(d), params) for d in self.lengths}
 
     def poses(self, gray: np.ndarray) -> int:
+        from tracking.anchors.model import square_corners
+
         placed = 0
         for d, det in self.det.items():
             corners, ids, _ = det.detectMarkers(gray)
@@ -58,9 +60,8 @@ class PlainTags:
                 L = self.lengths[d].get(int(mid))
                 if L is None:
                     continue
-                obj = np.array([[-L / 2, L / 2, 0], [L / 2, L / 2, 0], [L / 2, -L / 2, 0], [-L / 2, -L / 2, 0]])
-                ok, _r, _t = cv2.solvePnP(obj, c.reshape(4, 2).astype(np.float64), self.camera.K, self.camera.dist,
-                                          flags=cv2.SOLVEPNP_IPPE_SQUARE)
+                ok, _r, _t = cv2.solvePnP(square_corners(L), c.reshape(4, 2).astype(np.float64), self.camera.K,
+                                          self.camera.dist, flags=cv2.SOLVEPNP_IPPE_SQUARE)
                 placed += bool(ok)
         return placed
 

@@ -54,7 +54,8 @@ def test_replay_without_out_writes_to_out_replay_name(clip, tmp_path, capsys, mo
     monkeypatch.chdir(tmp_path)
     assert main(["replay", str(clip), "--anchors", str(anchors), "--no-video", "--no-slam", "--frames", "3"]) == 0
     lines = _lines(capsys, "replay: ")
-    assert "replay: writing to out/replay-clip (--out to choose the folder)" in lines
+    assert ("replay: wrote out/replay-clip/poses.tum, tracking.csv, report.json, trajectory.png (--out to choose "
+            "the folder)") in lines
     assert (tmp_path / "out" / "replay-clip" / "poses.tum").is_file()
     assert not (tmp_path / "out" / "replay-clip" / "anchors-found.json").exists()   # it tracked: nothing offered
 

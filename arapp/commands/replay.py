@@ -81,9 +81,9 @@ def run(args):
                          tracker_params={"marker_every": args.marker_every} if not args.no_slam else {},
                          calibration=args.calibration, anchors=args.anchors, occlusion=args.occlusion,
                          scene=args.scene, save_scene=args.save_scene)
-    if args.out is None:
+    chosen = args.out is not None
+    if not chosen:
         args.out = default_out(args.recording)
-        print(f"replay: writing to {args.out} (--out to choose the folder)", flush=True)
     # Written to a temporary folder moved into place at the end: a failure leaves no (empty) --out behind.
     with staged_folder(args.out) as tmp:
         report = replay(args.recording, tmp, opts, progress=terminal_progress(sys.stderr),  # stderr as now
@@ -92,7 +92,7 @@ def run(args):
     summary = ", ".join(f"{k} {report[k]:.4g}" for k in keys if isinstance(report.get(k), (int, float)))
     print(f"replay: {summary}")
     print(f"replay: wrote {args.out}/poses.tum, tracking.csv, report.json, trajectory.png"
-          + ("" if args.no_video else ", overlay.mp4"))
+          + ("" if args.no_video else ", overlay.mp4") + ("" if chosen else " (--out to choose the folder)"))
     if report.get("source_error"):
         print(f"replay: warning: {report['source_error']}")
     say_why_untracked(args, report)

@@ -267,8 +267,9 @@ class LiveEngine:
         """Discovery's thread: a new finding, carried to the app model with the next frame shown; while
         playback stands still (the end of a recording) the last frame is shown again to carry it."""
         self.state["discovery"] = offer
-        if not self.player.playing:
-            self.submit(lambda pipeline: None)
+        processor = self.stage.current()
+        if processor is not None and not self.player.playing:
+            processor.show_again()
 
     def end_discovery(self) -> None:
         """Stop anchor discovery (its offer was answered, or the engine stops)."""

@@ -155,6 +155,11 @@ class Processor(threading.Thread):
         self._commands.put(fn)
         self.inbox.wake()
 
+    def show_again(self) -> None:
+        """Process the last frame again (drawn, not tracked): a paused view shows what changed beside the
+        pipeline (the highlight, the marks, the engine's state carried with each frame)."""
+        self.submit(lambda pipeline: None)
+
     def _display(self, image: np.ndarray) -> np.ndarray:
         scaled = fit_to(image, self.display_size)
         out = None if self.display_buffer is None else self.display_buffer(scaled.shape[:2] + (4,))
@@ -298,7 +303,7 @@ class ProcessingStage:
             processor = self.processor
         if processor is not None:
             processor.highlight = point
-            processor.submit(lambda p: None)  # redraw a paused frame
+            processor.show_again()
 
     def set_marks(self, on: bool) -> None:
         self.marks = bool(on)
@@ -306,7 +311,7 @@ class ProcessingStage:
             processor = self.processor
         if processor is not None:
             processor.marks = self.marks
-            processor.submit(lambda p: None)  # redraw a paused frame
+            processor.show_again()
 
     def current(self) -> Processor | None:
         with self._lock:

@@ -128,8 +128,8 @@ def _open_capture(path: Path) -> cv2.VideoCapture:
     if path.stat().st_size == 0:
         raise SourceError(f"{path}: video file is empty")
     if _looks_like_text(path):
-        raise SourceError(f"{path}: a text file, not a video; give a video (mp4, avi, mov, webm, mkv) or a recording "
-                          "folder")
+        raise SourceError(f"{path}: a text file, not a video; give a video (mp4, avi, mov, webm, mkv), a recording "
+                          "folder or a folder of images")
     log = cv2.utils.logging
     level = log.getLogLevel()
     log.setLogLevel(log.LOG_LEVEL_ERROR)  # the backend-fallback warnings: the error below says it all
@@ -159,6 +159,17 @@ def _as_bgr(img: np.ndarray) -> np.ndarray:
     if img.shape[2] == 4:
         return cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
     return img
+
+
+def _calibrated(calibration, width: int, height: int, what: str) -> tuple[Camera, list[str]]:
+    """(the camera of `calibration` (a Camera, or a file tracking.calibration_file reads) at the stream's size
+    (_fit_camera), the notes a user should read about the file). A file without an image size is taken at
+    width x height, which a note says."""
+    if isinstance(calibration, Camera):
+        cam, notes = calibration, []
+    else:
+        cam, notes = Camera.load_file(calibration, (width, height))
+    return _fit_camera(cam, width, height, str(calibration), what), notes
 
 
 def _fit_camera(cam: Camera, width: int, height: int, calib_name: str, what: str) -> Camera:

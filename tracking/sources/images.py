@@ -18,7 +18,7 @@ import cv2
 from tracking.camera import Camera
 from tracking.errors import SourceError
 
-from .base import Frame, Source, _fit_camera
+from .base import Frame, Source, _calibrated
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 DEFAULT_FPS = 30.0
@@ -59,12 +59,8 @@ class ImageFolderSource(Source):
         self.notes = [] if fps else [f"{self.describe()}: played at {self.fps:g} fps (a folder of images has no "
                                      "frame rate)"]
         if calibration is not None:
-            if isinstance(calibration, Camera):
-                cam = calibration
-            else:
-                cam, notes = Camera.load_file(calibration, (self.width, self.height))
-                self.notes += notes
-            self._camera = _fit_camera(cam, self.width, self.height, str(calibration), str(self.path))
+            self._camera, notes = _calibrated(calibration, self.width, self.height, str(self.path))
+            self.notes += notes
         self.info = {"kind": self.kind, "path": str(self.path)}
 
     def describe(self) -> str:

@@ -13,7 +13,7 @@ import cv2
 from tracking.camera import Camera
 from tracking.errors import SourceError
 
-from .base import Frame, Source, _as_bgr, _fit_camera
+from .base import Frame, Source, _as_bgr, _calibrated
 
 
 def _v4l2_path(device: int | str) -> str:
@@ -71,12 +71,8 @@ class V4L2Source(Source):
         self.fps = float(got_fps) if got_fps and got_fps > 0 else float(fps or 30.0)
         self.granted = {"width": w, "height": h, "fps": self.fps, "fourcc": _fourcc_str(self._cap.get(cv2.CAP_PROP_FOURCC))}
         self.requested = {"width": width, "height": height, "fps": fps, "fourcc": fourcc}
-        if calibration is not None:
-            if isinstance(calibration, Camera):
-                cam = calibration
-            else:  # a file without an image size is for the granted size (the note says so)
-                cam, self.notes = Camera.load_file(calibration, (w, h))
-            self._camera = _fit_camera(cam, w, h, str(calibration), self.path)
+        if calibration is not None:   # a file without an image size is for the granted size (the note says so)
+            self._camera, self.notes = _calibrated(calibration, w, h, self.path)
         self.info = {"kind": "v4l2", "device": self.path, "name": _v4l2_name(self.path), **self.granted}
 
     def describe(self) -> str:

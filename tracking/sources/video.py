@@ -9,7 +9,7 @@ import cv2
 
 from tracking.camera import Camera
 
-from .base import Frame, Source, _as_bgr, _fit_camera, _open_capture, _probe_first_frame
+from .base import Frame, Source, _as_bgr, _calibrated, _open_capture, _probe_first_frame
 
 
 class VideoFileSource(Source):
@@ -32,11 +32,7 @@ class VideoFileSource(Source):
         n = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT))
         self.frame_count = n if n > 0 else None
         if calibration is not None:
-            if isinstance(calibration, Camera):
-                cam = calibration
-            else:  # a file without an image size is for this video's frames (the note says so)
-                cam, self.notes = Camera.load_file(calibration, (self.width, self.height))
-            self._camera = _fit_camera(cam, self.width, self.height, str(calibration), str(self.path))
+            self._camera, self.notes = _calibrated(calibration, self.width, self.height, str(self.path))
         self.info = {"kind": "file", "path": str(self.path)}
 
     def describe(self) -> str:
