@@ -27,6 +27,22 @@ ROOT = Path(__file__).resolve().parents[1]
 PRUSALINK = ROOT / ".venv-prusalink" / "bin" / "prusalink"
 USER, PASSWORD, API_KEY = "maker", "test-password-1", "arappTestKey42"
 REALM = "Administrator"
+# seconds PrusaLink shows a job FINISHED or STOPPED (its end screen) and takes no new one: 11 in PrusaLink
+# (const.PRINT_END_TIMEOUT). The tests print one job after another, and each waited out the last one's 11 s
+# (the link's `_settled`): set shorter here, the way a fake clock stands in for a real timeout. The wait itself
+# stays: test_a_job_right_after_another_waits_for_the_end_screen meets it.
+PRINT_END_S = 2.5
+# PrusaLink's own entry point (bin/prusalink) with that one constant set first (argv[1]); it runs in-process
+LAUNCH = """\
+import sys
+import prusa.link.const as const
+const.PRINT_END_TIMEOUT = float(sys.argv.pop(1))
+import prusa.link.printer_adapter.state_manager as state_manager
+state_manager.PRINT_END_TIMEOUT = const.PRINT_END_TIMEOUT
+from prusa.link.__main__ import main
+sys.argv[0] = "prusalink"
+sys.exit(main())
+"""
 
 PRUSALINK_INI = """\
 [daemon]
@@ -92,7 +108,8 @@ class PrusaLinkServer:
                                                                    storage=self.storage))
         self._log = open(base / "prusalink.out", "w")
         # unbuffered: its log is whole when a test fails (a terminated PrusaLink leaves no buffer behind)
-        self.proc = subprocess.Popen([str(PRUSALINK), "-f", "-c", str(base / "prusalink.ini")],
+        self.proc = subprocess.Popen([str(PRUSALINK.parent / "python"), "-c", LAUNCH, str(PRINT_END_S),
+                                      "-f", "-c", str(base / "prusalink.ini")],
                                      stdout=self._log, stderr=subprocess.STDOUT, cwd=data,
                                      env={**os.environ, "PYTHONUNBUFFERED": "1"})
 

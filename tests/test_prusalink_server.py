@@ -204,3 +204,20 @@ def test_temperatures_reach_the_app(prusalink_server, tmp_path):
     assert (215.0, 60.0) in shown, shown
     actual = seen[-1].temperatures["T"][0]
     assert abs(actual - fw.printer.temp[0]) < 30.0  # a report at most 2 s old of a hotend heating at its pace
+
+
+def test_a_job_right_after_another_waits_for_the_end_screen(prusalink_server, tmp_path):
+    # PrusaLink shows an ended job FINISHED for a while (PRINT_END_S here) and refuses a new one meanwhile: the
+    # link waits that out, saying so, instead of failing on PrusaLink's 409
+    fw = prusalink_server.firmware
+    first, second = job(12), [line.replace("G1 X", "G1 Y") for line in job(12)]
+    link = link_for(prusalink_server)
+    assert link.print_gcode(first, gcode_path=str(tmp_path / "first.gcode")).status == "done"
+    assert prusalink_server.status()["printer"]["state"] == "FINISHED"
+    since = len(fw.executed)
+    seen = []
+    state = link.print_gcode(second, progress=seen.append, gcode_path=str(tmp_path / "second.gcode"))
+    link.close()
+    assert state.status == "done"
+    assert any(p.message == "waiting for the printer to leave FINISHED (the last job's end)" for p in seen)
+    assert ran(fw, since, second) == commands(second)
