@@ -13,6 +13,7 @@ import argparse
 import importlib
 import os
 import sys
+import warnings
 
 # (subcommand, module under arapp.commands); the order is the order in --help.
 COMMANDS = [
@@ -49,6 +50,22 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def show_source_warnings(command: str) -> None:
+    """Show a source's warnings (a video that stops decoding early) as one line naming the command, instead of
+    Python's two lines with a line of arapp's own code."""
+    from tracking.sources import SourceWarning
+
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, SourceWarning):
+            print(f"arapp {command}: warning: {message}", file=sys.stderr)
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
+
+
 def main(argv: list[str] | None = None) -> int:
     # PyOpenGL binds its platform on first import; the overlay renders offscreen (EGL, else OSMesa:
     # arapp.render.select_platform falls back), also on a desktop where GLX would be the default.
@@ -57,6 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command is None:
         args = parser.parse_args(["gui", *(argv or [])])
+    show_source_warnings(args.command)
     try:
         return int(args._run(args) or 0)
     except KeyboardInterrupt:

@@ -193,7 +193,7 @@ def _bad_inputs(tmp_path: Path) -> dict[str, Path]:
     return {"missing": tmp_path / "missing.mp4", "text": text, "noise": noise, "folder": folder}
 
 
-@pytest.mark.parametrize("kind, needle", [("missing", "no such recording folder or video file"),
+@pytest.mark.parametrize("kind, needle", [("missing", "no such recording folder, video or image file"),
                                           ("text", "a text file, not a video"),
                                           ("noise", "OpenCV cannot open this video"),
                                           ("folder", "no session.json")])

@@ -140,3 +140,54 @@ def test_anchors_without_their_place_are_said(tmp_path, capsys):
     assert main(["replay", str(CLIPBOARD / "frames"), "--anchors", str(tmp_path / "two.json"), "--out",
                  str(tmp_path / "b"), "--no-video", "--no-slam", "--frames", "2"]) == 0
     assert not [ln for ln in capsys.readouterr().out.splitlines() if "world_from_anchor" in ln]
+
+
+PHOTOS = Path(__file__).resolve().parent / "data" / "realphotos" / "opencv"
+
+
+def test_one_photo_replays_as_a_one_frame_video(tmp_path, capsys):
+    # a photo of markers (OpenCV's singlemarkerssource.jpg, DICT_6X6_250) given as it is, as a user tries one:
+    # one frame, the tag discovery offers, then tracked on it; OpenCV's own detector is the oracle for the tag
+    photo = PHOTOS / "singlemarkerssource.jpg"
+    assert main(["replay", str(photo), "--out", str(tmp_path / "a"), "--no-video"]) == 0
+    out = capsys.readouterr().out
+    assert f"replay: image {photo}: no calibration" in out and "frames 1, tracked_fraction 0" in out
+    assert "played at" not in out   # one image: no frame rate to speak of
+    (found,) = json.loads((tmp_path / "a" / "anchors-found.json").read_text())
+    gray = cv2.imread(str(photo), cv2.IMREAD_GRAYSCALE)
+    dictionary = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, found["dictionary"]))
+    _, ids, _ = cv2.aruco.ArucoDetector(dictionary).detectMarkers(gray)
+    assert found["id"] in ids.ravel().tolist()
+    assert main(["replay", str(photo), "--anchors", str(tmp_path / "a" / "anchors-found.json"),
+                 "--out", str(tmp_path / "b"), "--no-video"]) == 0
+    assert "frames 1, tracked_fraction 1" in capsys.readouterr().out
+
+
+def test_a_video_that_stops_decoding_is_said_once_in_one_line(tmp_path, capsys):
+    # an MJPG AVI cut at 60 %: its header promises 30 frames, 15-odd decode; Python's own warning (two lines,
+    # one of them arapp's code) is not shown beside replay's line, and a stream that gave frames says which
+    video = tmp_path / "cut.avi"
+    writer = cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 30, (160, 120))
+    for i in range(30):
+        writer.write(np.full((120, 160, 3), 8 * i, np.uint8))
+    writer.release()
+    video.write_bytes(video.read_bytes()[:int(video.stat().st_size * 0.6)])
+    assert main(["replay", str(video), "--out", str(tmp_path / "r"), "--no-video", "--no-slam"]) == 0
+    captured = capsys.readouterr()
+    warned = [line for line in captured.out.splitlines() + captured.err.splitlines() if "decoding stopped" in line]
+    assert len(warned) == 1 and warned[0].startswith("replay: warning: ")
+    assert "SourceWarning" not in captured.err and "for frame in" not in captured.err
+    n = json.loads((tmp_path / "r" / "report.json").read_text())["frames"]
+    assert 0 < n < 30 and warned[0].endswith(f"of 30 (truncated or corrupt file); frames 0..{n - 1} were delivered")
+    # the other commands show a source's warning in one line naming the command
+    assert main(["calibrate", "--source", str(video), "-o", str(tmp_path / "c.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert f"arapp calibrate: warning: {video}: decoding stopped at frame {n} of 30" in err
+    assert "SourceWarning" not in err
+
+
+def test_a_stream_that_gave_nothing_says_so():
+    from tracking.sources.base import Source
+
+    assert Source._delivered(0) == "no frame was delivered"
+    assert Source._delivered(3) == "frames 0..2 were delivered"

@@ -24,9 +24,11 @@ def add_arguments(parser):
 
 
 def run(args):
+    import warnings
     from pathlib import Path
 
     from tracking.recording.writer import record
+    from tracking.sources import SourceWarning
 
     from arapp.exchange.staging import staged_folder
     from arapp.engine.input_source import describe_anchors, open_input
@@ -45,10 +47,12 @@ def run(args):
                     height=args.height, fps=args.fps, default_anchor_note=False) as opened:
         for line in opened.notes:
             print(f"record: {line}", flush=True)
-        # Recorded into a temporary folder that replaces --out at the end: a failure leaves nothing behind.
-        with staged_folder(out, replace=True) as tmp:
+        # Recorded into a temporary folder that replaces --out at the end: a failure leaves nothing behind. A
+        # source's warning is said once, by record() at the end.
+        with staged_folder(out, replace=True) as tmp, warnings.catch_warnings():
+            warnings.simplefilter("ignore", SourceWarning)
             session = record(opened.source, tmp, anchors=opened.anchor_blocks, seconds=args.seconds, force=True,
-                             fourcc=args.codec, depth=not args.no_depth)
+                             fourcc=args.codec, depth=not args.no_depth, name=out)
     n_depth = len(list((out / "depth").glob("*.png"))) if (out / "depth").is_dir() else 0
     depth = f", depth for {n_depth} frames (depth/, 16-bit PNG, mm)" if n_depth else ""
     print(f"{out}: {session.video}, {session.camera.width}x{session.camera.height} @ {session.fps:.1f} fps{depth}")

@@ -1,6 +1,7 @@
 """`arapp replay`: run the tracking pipeline headless on a recording and write its outputs."""
 
 import sys
+import warnings
 from pathlib import Path
 
 # the anchor list of what a replay that tracked nothing found in the video, written into its output folder
@@ -61,6 +62,15 @@ def default_out(recording: str) -> str:
 
 
 def run(args):
+    from tracking.sources import SourceWarning
+
+    # a source's warning is said once, with the summary (report["source_error"]), not again by each opening
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SourceWarning)
+        return _run(args)
+
+
+def _run(args):
     from arapp.exchange.staging import staged_folder
     from arapp.geometry.placement import check_size_mm
     from arapp.engine.replay import ReplayOptions, replay, terminal_progress

@@ -16,7 +16,7 @@ import numpy as np
 
 from tracking.anchors.diagnose import suggestion_anchors, suggestion_line, why_line
 from tracking.anchors.discover import Discovery
-from tracking.sources.images import image_files
+from tracking.sources.images import image_files, is_image
 
 from arapp.engine.input_source import open_input
 from arapp.exchange.meshes import write_atomic
@@ -26,9 +26,9 @@ ENOUGH_FRAMES = 3    # once something is found in this many, the other sampled f
 
 
 def sample_frames(video: str | Path, count: int = SAMPLED_FRAMES) -> list[np.ndarray]:
-    """Up to `count` gray frames spread evenly over a video file or a folder of images (fewer when it has
-    fewer or ends early)."""
-    if Path(video).is_dir():
+    """Up to `count` gray frames spread evenly over a video file, a folder of images or an image (fewer when it
+    has fewer or ends early)."""
+    if Path(video).is_dir() or is_image(video):
         files = image_files(Path(video))
         picks = sorted({int((k + 0.5) * len(files) / count) for k in range(count)}) if files else []
         grays = (cv2.imread(str(files[i]), cv2.IMREAD_GRAYSCALE) for i in picks)

@@ -19,6 +19,7 @@ from PySide6.QtWidgets import (
 
 from arapp.engine import sourcespec
 from arapp.gui.tasks import Task
+from tracking.sources.images import IMAGE_SUFFIXES
 
 
 
@@ -30,9 +31,11 @@ def ask_recording(parent) -> str | None:
 
 
 def ask_video(parent) -> tuple[str, str | None] | None:
-    """Ask for a video, then its calibration YAML: (video, calibration or None); None when cancelled."""
+    """Ask for a video (or one image), then its calibration YAML: (video, calibration or None); None when
+    cancelled."""
+    images = " ".join(f"*{s}" for s in IMAGE_SUFFIXES)
     video, _ = QFileDialog.getOpenFileName(parent, "Open a video", str(Path.cwd()),
-                                           "Videos (*.mp4 *.mkv *.avi *.mov *.webm);;All files (*)")
+                                           f"Videos (*.mp4 *.mkv *.avi *.mov *.webm);;Images ({images});;All files (*)")
     if not video:
         return None
     calib, _ = QFileDialog.getOpenFileName(parent, "Its camera calibration (OpenCV YAML; Cancel: estimate it)",

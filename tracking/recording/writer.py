@@ -188,7 +188,7 @@ def _stop_on_ctrl_c() -> Iterator[dict]:
 
 
 def _write_frames(source, writer: RecordingWriter, stop: dict, seconds: float | None, max_frames: int | None,
-                  progress: Callable[[str], None], depth: bool) -> int:
+                  progress: Callable[[str], None], depth: bool, name: str) -> int:
     """Write the source's frames (with their depth when `depth`) until it ends, `seconds` of frame time or
     `max_frames` have passed or `stop["flag"]` is set, telling `progress` twice a second; returns the
     frames dropped (gaps in the source's frame indices)."""
@@ -203,7 +203,7 @@ def _write_frames(source, writer: RecordingWriter, stop: dict, seconds: float | 
         if now - last_print > 0.5:
             last_print = now
             rate = n / max(now - wall0, 1e-6)
-            progress(f"\rrecording {writer.folder}: {n} frames, {rate:5.1f} fps, {dropped} dropped ")
+            progress(f"\rrecording {name}: {n} frames, {rate:5.1f} fps, {dropped} dropped ")
         if stop["flag"] or (max_frames and n >= max_frames) or (seconds and writer.times[-1] >= seconds):
             break
     return dropped
@@ -211,7 +211,7 @@ def _write_frames(source, writer: RecordingWriter, stop: dict, seconds: float | 
 
 def record(source, folder: str | Path, anchors: list | None = None, seconds: float | None = None,
            max_frames: int | None = None, force: bool = False, fourcc: str = "MJPG", quality: int = 90,
-           progress: Callable[[str], None] | None = None, depth: bool = True) -> Session:
+           progress: Callable[[str], None] | None = None, depth: bool = True, name: str | Path | None = None) -> Session:
     """Record frames from `source` (a tracking.sources Source) into `folder` until it ends,
     `seconds` of frame time or `max_frames` have passed, or Ctrl-C (which finishes the file cleanly).
 
@@ -220,8 +220,10 @@ def record(source, folder: str | Path, anchors: list | None = None, seconds: flo
     Timestamps are the source's own (capture times for cameras). Dropped frames
     are counted from gaps in the source's frame indices. Frames that carry depth
     (depth cameras, recordings with a depth stream) are recorded with it unless
-    `depth` is False. Returns the written Session.
+    `depth` is False. `name`: the folder as the progress lines and errors call it (default `folder`; a
+    caller recording into a staging folder names the one it becomes). Returns the written Session.
     """
+    name = str(folder if name is None else name)
     if anchors is None and getattr(source, "session", None) is not None:
         anchors = source.session.anchors  # re-recording a recording keeps its anchors
     info = dict(getattr(source, "info", {}) or {})
@@ -232,16 +234,16 @@ def record(source, folder: str | Path, anchors: list | None = None, seconds: flo
         progress = lambda s: print(s, end="", file=sys.stderr, flush=True)  # noqa: E731
     try:
         with _stop_on_ctrl_c() as stop:
-            dropped = _write_frames(source, writer, stop, seconds, max_frames, progress, depth)
+            dropped = _write_frames(source, writer, stop, seconds, max_frames, progress, depth, name)
             err = getattr(source, "error", None)
     finally:
         session = writer.close()
     n = writer.frame_count
     with_depth = f", {writer.depth_frames} with depth" if writer.depth_frames else ""
-    progress(f"\rrecorded {writer.folder}: {n} frames{with_depth}, {dropped} dropped"
+    progress(f"\rrecorded {name}: {n} frames{with_depth}, {dropped} dropped"
              + (" (stopped by Ctrl-C)" if stop["flag"] else "") + "\n")
     if n == 0:
-        raise SourceError(f"{writer.folder}: the source delivered no frames" + (f" ({err})" if err else ""))
+        raise SourceError(f"{name}: the source delivered no frames" + (f" ({err})" if err else ""))
     if err:
         progress(f"warning: the source ended with an error: {err}\n")
     return session

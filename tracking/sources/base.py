@@ -76,6 +76,11 @@ class Source:
         self.error = message
         warnings.warn(message, SourceWarning, stacklevel=3)
 
+    @staticmethod
+    def _delivered(i: int) -> str:
+        """What a stream that ended early at frame `i` had given: for the end of a `_fail` message."""
+        return f"frames 0..{i - 1} were delivered" if i > 0 else "no frame was delivered"
+
     def __iter__(self) -> Iterator[Frame]:
         if self.closed:
             raise SourceError(f"{self.describe()}: source is closed")

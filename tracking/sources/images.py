@@ -1,4 +1,5 @@
-"""A folder of images played as a video (spec: the folder's path): photo sequences and frame dumps.
+"""A folder of images played as a video (spec: the folder's path): photo sequences and frame dumps; one
+image file plays as a video of one frame (a photo of a marker, to try an anchor on).
 
 The images are the folder's own files whose suffix is in IMAGE_SUFFIXES, in natural name order
 (`frame2.png` before `frame10.png`), at frame / fps seconds (30 fps unless given: a folder carries no
@@ -30,14 +31,22 @@ def natural_key(name: str) -> list:
     return [int(part) if part.isdigit() else part.lower() for part in re.split(r"(\d+)", name)]
 
 
+def is_image(path: str | Path) -> bool:
+    """Whether `path` names an image file by its suffix (IMAGE_SUFFIXES, any case)."""
+    return Path(path).suffix.lower() in IMAGE_SUFFIXES
+
+
 def image_files(folder: Path) -> list[Path]:
-    """The image files directly in `folder` (IMAGE_SUFFIXES, any case), in natural name order."""
-    files = [p for p in folder.iterdir() if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES]
+    """The image files directly in `folder` (IMAGE_SUFFIXES, any case), in natural name order; for an image
+    file itself, [that file]."""
+    if folder.is_file():
+        return [folder] if is_image(folder) else []
+    files = [p for p in folder.iterdir() if p.is_file() and is_image(p)]
     return sorted(files, key=lambda p: natural_key(p.name))
 
 
 class ImageFolderSource(Source):
-    """The images of a folder as frames (`image_files` order), frame i at i / fps seconds. With
+    """The images of a folder (or one image file) as frames (`image_files` order), frame i at i / fps seconds. With
     `calibration` (a file tracking.calibration_file reads, or a Camera) it has a camera, fitted to the
     images' size like a video's."""
 
@@ -56,14 +65,16 @@ class ImageFolderSource(Source):
         self.height, self.width = first.shape[:2]
         self.fps = float(fps or DEFAULT_FPS)
         self.frame_count = len(self.files)
-        self.notes = [] if fps else [f"{self.describe()}: played at {self.fps:g} fps (a folder of images has no "
-                                     "frame rate)"]
+        self.notes = [] if fps or self.frame_count == 1 else [
+            f"{self.describe()}: played at {self.fps:g} fps (a folder of images has no frame rate)"]
         if calibration is not None:
             self._camera, notes = _calibrated(calibration, self.width, self.height, str(self.path))
             self.notes += notes
         self.info = {"kind": self.kind, "path": str(self.path)}
 
     def describe(self) -> str:
+        if self.path.is_file():
+            return f"image {self.path}"
         return f"image folder {self.path} ({self.frame_count} images)"
 
     def _frames(self) -> Iterator[Frame]:
@@ -72,11 +83,11 @@ class ImageFolderSource(Source):
                 return
             img = cv2.imread(str(path), READ_FLAGS)
             if img is None:
-                self._fail(f"{path}: OpenCV cannot read this image; frames 0..{i - 1} were delivered")
+                self._fail(f"{path}: OpenCV cannot read this image; {self._delivered(i)}")
                 return
             if img.shape[:2] != (self.height, self.width):
                 self._fail(f"{path}: {img.shape[1]}x{img.shape[0]}, but the folder's first image is "
-                           f"{self.width}x{self.height}; frames 0..{i - 1} were delivered (every image must have "
+                           f"{self.width}x{self.height}; {self._delivered(i)} (every image must have "
                            "one size)")
                 return
             yield Frame(i, i / self.fps, img)

@@ -22,7 +22,7 @@ from urllib.parse import parse_qsl
 from tracking.errors import SessionError, SourceError
 
 from .base import Source
-from .images import IMAGE_SUFFIXES, ImageFolderSource, image_files
+from .images import IMAGE_SUFFIXES, ImageFolderSource, image_files, is_image
 from .oak import DepthAISource, list_depthai
 from .recording import RecordingSource
 from .v4l2 import V4L2Source, list_v4l2
@@ -48,7 +48,7 @@ class SourceOptions:
 
 def _open_file(target: str, options: SourceOptions) -> Source:
     """A recording folder (or its session.json) as a RecordingSource, a folder of images without session.json
-    as an ImageFolderSource, a video file as a VideoFileSource."""
+    or one image file as an ImageFolderSource, a video file as a VideoFileSource."""
     path = Path(target)
     if path.name == "session.json" and path.is_file():
         path = path.parent
@@ -62,9 +62,11 @@ def _open_file(target: str, options: SourceOptions) -> Source:
         if options.calibration is not None:
             raise SourceError(f"{path}: a recording carries its own camera in session.json; drop --calibration")
         return RecordingSource(path, realtime=options.realtime, loop=options.loop)
+    if path.is_file() and is_image(path):
+        return ImageFolderSource(path, options.calibration, options.fps)
     if path.is_file():
         return VideoFileSource(path, options.calibration, options.fps)
-    raise SourceError(f"{path}: no such recording folder or video file")
+    raise SourceError(f"{path}: no such recording folder, video or image file")
 
 
 def _open_v4l2(target: str, options: SourceOptions) -> Source:
@@ -103,7 +105,7 @@ class Scheme:
 
 # The registry: one row per scheme (the first is the default for plain paths).
 SCHEMES: dict[str, Scheme] = {s.name: s for s in (
-    Scheme("file", _open_file, RecordingSource.live, "a recording folder, video file or folder of images "
+    Scheme("file", _open_file, RecordingSource.live, "a recording folder, video file, folder of images or image "
            "(optionally 'file:PATH', a video or images with '?calibration=CAM.yaml')"),
     Scheme("v4l2", _open_v4l2, V4L2Source.live, "'v4l2:0', 'v4l2:/dev/video2'", target_name="a device",
            devices=_v4l2_devices),

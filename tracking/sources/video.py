@@ -45,7 +45,7 @@ class VideoFileSource(Source):
             if not ok or img is None:
                 if self.frame_count and i < self.frame_count:
                     self._fail(f"{self.path}: decoding stopped at frame {i} of {self.frame_count} "
-                               f"(truncated or corrupt file); frames 0..{i - 1} were delivered")
+                               f"(truncated or corrupt file); {self._delivered(i)}")
                 return
             yield Frame(i, i / self.fps, _as_bgr(img))
             i += 1
