@@ -179,3 +179,19 @@ def test_placement_accepts_a_single_turn_about_the_marker_normal():
     assert p.rotation_deg == (0.0, 0.0, 90.0)
     assert np.allclose(p.rotation() @ [1, 0, 0], [0, 1, 0])
     assert Placement.from_any({"size_mm": 20}, p).size_mm == 20.0
+
+
+def test_a_bare_name_is_the_library_model_of_that_name(tmp_path, monkeypatch, capsys):
+    # from a folder without models/ (a user's own), `vase` is the checkout's models/vase.json; a path that
+    # exists wins over the library, and a name the library lacks lists the names it has
+    monkeypatch.chdir(tmp_path)
+    by_name, by_file = load_model("vase"), load_model(MODELS / "vase.json")
+    assert by_name.name == by_file.name and len(by_name.surfaces) == len(by_file.surfaces)
+    np.testing.assert_array_equal(by_name.surfaces[0].control_points, by_file.surfaces[0].control_points)
+    (tmp_path / "vase").write_text("not a model")
+    with pytest.raises(ModelError, match="not a model file"):
+        load_model("vase")
+    with pytest.raises(ModelError, match=r"vasee: no such file \(the library's models, by name: .*\bvase\b"):
+        load_model("vasee")
+    assert main(["model", "info", "torus"]) == 0
+    assert f"file: {MODELS / 'torus.json'}" in capsys.readouterr().out

@@ -8,11 +8,11 @@ def add_arguments(parser):
     info = sub.add_parser("info", help="surfaces, degrees, domains, bounding box, triangle count",
                           description="Print the surfaces, degrees, domains, bounding box and the "
                           "triangle count at default quality of a model file (.json or a mesh).")
-    info.add_argument("path", help="model file: .json (arapp model) or .stl/.obj/.ply/.3mf/.glb")
+    info.add_argument("path", help="model file: .json (arapp model) or .stl/.obj/.ply/.3mf/.glb, or a library model's name (vase)")
     export = sub.add_parser("export", help="write a watertight solid in millimetres",
                             description="Write the model as a watertight solid in millimetres, scaled "
                             "to its placement size (or --size), open surfaces thickened.")
-    export.add_argument("path", help="model file (.json or a mesh)")
+    export.add_argument("path", help="model file (.json or a mesh), or a library model's name (vase)")
     export.add_argument("-o", "--output", required=True, metavar="OUT",
                         help="output file: .stl, .obj, .ply, .3mf or .glb")
     export.add_argument("--thickness", type=float, default=2.0, metavar="MM",
@@ -28,14 +28,13 @@ def _fmt_range(lo, hi):
 
 
 def run(args) -> int:
-    from pathlib import Path
-
     from arapp.geometry import load_model
+    from arapp.geometry.library import model_path
 
     model = load_model(args.path)
     if args.model_command == "info":
         print(f"model: {model.name}")
-        print(f"file: {Path(args.path)}")
+        print(f"file: {model_path(args.path)}")
         print(f"units: {model.units}")
         print("color: " + ", ".join(f"{c:.3g}" for c in model.color))
         pl = model.placement

@@ -10,7 +10,8 @@ HELP = "slice a model (JSON model or STL/OBJ/3MF) into G-code for a printer"
 
 
 def add_arguments(parser):
-    parser.add_argument("model", help="model JSON file, or a mesh file (.stl, .obj, .3mf) in millimetres")
+    parser.add_argument("model", help="model JSON file, a mesh file (.stl, .obj, .3mf) in millimetres, or a "
+                        "library model's name (vase)")
     parser.add_argument("-o", "--output", required=True, help="G-code file to write")
     parser.add_argument("--material", default="PLA", type=str.upper,
                         choices=["PLA", "PETG", "ABS", "TPU", "NYLON"], help="filament (temperatures, fan, density)")

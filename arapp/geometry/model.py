@@ -22,6 +22,7 @@ from arapp.exchange.meshes import EXPORT_SUFFIXES, MESH_SUFFIXES, MeshFileError,
 from . import construct
 from .curve import NurbsCurve
 from .errors import GeometryError, ModelError, fmt
+from .library import model_path
 from .placement import MAX_SIZE_MM, Placement, check_size_mm  # noqa: F401 - MAX_SIZE_MM: part of this module's API
 from .solid import SolidError, shells_solid
 from .surface import NurbsSurface
@@ -156,10 +157,9 @@ class Model:
 
 # ---------------------------------------------------------------- loading
 def load_model(path) -> Model:
-    """Load a JSON model (see models/README.md) or a mesh file (.stl/.obj/.ply/.3mf/.glb)."""
-    path = Path(path)
-    if not path.exists():
-        raise ModelError(str(path), "no such file")
+    """Load a JSON model (see models/README.md) or a mesh file (.stl/.obj/.ply/.3mf/.glb); a bare name that is no
+    file names a model of the library (`vase`: models/vase.json, arapp.geometry.library)."""
+    path = model_path(path)
     if path.suffix.lower() in MESH_SUFFIXES:
         return _load_mesh(path)
     if path.suffix.lower() != ".json":

@@ -28,7 +28,8 @@ from arapp.gui.habits import install_habits
 from arapp.gui.overlays.marker_marks import install_marks
 from arapp.gui.overlays.orbit_view import install_orbit
 from arapp.gui.menus import build_menus, update_recent_menus
-from arapp.gui.panels.model import MODEL_FILTER, ModelPanel, library_files
+from arapp.geometry.library import library_files
+from arapp.gui.panels.model import MODEL_FILTER, ModelPanel
 from arapp.gui.panels.replay import ReplayBar
 from arapp.gui.panels.tracking import AnchorsDialog, TrackingPanel
 from arapp.gui.print.dialog import PrintDialog

@@ -34,19 +34,6 @@ MODEL_FILTER = f"Models (*.json {file_filter()});;NURBS models (*.json);;Meshes 
 THUMB = 72
 
 
-def library_folder() -> Path:
-    """models/ in the working directory when there is one, else next to the arapp package (a source checkout)."""
-    here = Path.cwd() / "models"
-    if here.is_dir():
-        return here
-    return Path(__file__).resolve().parents[3] / "models"
-
-
-def library_files(folder: Path | None = None) -> list[Path]:
-    folder = folder or library_folder()
-    return sorted(folder.glob("*.json")) if folder.is_dir() else []
-
-
 def _spin(lo: float, hi: float, step: float, decimals: int, suffix: str = "",
           sample: str | None = None, suffix_room: str = "") -> QDoubleSpinBox:
     """A spin box; with `sample` (a typical value's text) sized for that value, not the range's ends."""
