@@ -259,3 +259,14 @@ def test_calibration_banner_shows_only_for_the_estimated_camera(qtbot):
     assert banner.isHidden()
     banner.set_camera(None)
     assert banner.isHidden()
+
+
+def test_a_portrait_frame_is_the_same_sensor_turned():
+    # a phone video held upright (OpenCV turns it by the file's rotation tag): the 65 degrees span its height,
+    # so its focal length is the landscape frame's; a ray at half that angle above the axis meets the top edge
+    from tracking.default_intrinsics import DEFAULT_HFOV_DEG, estimated_camera
+
+    portrait, landscape = estimated_camera(1080, 1920), estimated_camera(1920, 1080)
+    assert portrait.fx == portrait.fy == landscape.fx == pytest.approx(960 / math.tan(math.radians(32.5)))
+    ray = np.array([[0.0, -math.tan(math.radians(DEFAULT_HFOV_DEG) / 2), 1.0]])
+    assert abs(portrait.project(ray)[0, 1] - (-0.5)) < 1e-9

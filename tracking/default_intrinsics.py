@@ -3,7 +3,10 @@
 A webcam or a plain video opened without a calibration file still needs
 intrinsics for the tracker to draw anything. This guess is a pinhole camera
 with square pixels, the principal point at the image centre and the focal
-length from a typical webcam's horizontal field of view. Sizes and distances
+length from a typical webcam's horizontal field of view, taken across the
+image's long side: a portrait video (a phone held upright, which OpenCV turns
+by the file's rotation tag) is the same sensor turned, its field of view
+across the width the narrower one. Sizes and distances
 measured with it are approximate (a 10 degree error in the field of view is
 ~15 % in scale); calibrating the camera (`arapp calibrate`, or the GUI's
 calibration wizard) replaces it.
@@ -27,21 +30,21 @@ from tracking.camera import Camera
 from tracking.errors import CalibrationError
 
 DEFAULT_HFOV_DEG = 65.0
-"""Horizontal field of view assumed for an uncalibrated camera, degrees."""
+"""Field of view across the long side (horizontal, landscape) assumed for an uncalibrated camera, degrees."""
 
 ESTIMATED_NOTE = "uncalibrated (estimated): sizes approximate, calibrate for accuracy"
 
 
 def estimated_camera(width: int, height: int, hfov_deg: float = DEFAULT_HFOV_DEG) -> Camera:
-    """A pinhole Camera for a `width` x `height` image (pixels) whose horizontal field of view is
-    `hfov_deg` degrees: fx = fy = (width / 2) / tan(hfov / 2), principal point at the image centre,
-    zero distortion."""
+    """A pinhole Camera for a `width` x `height` image (pixels) whose field of view across its long side is
+    `hfov_deg` degrees: fx = fy = (max(width, height) / 2) / tan(hfov / 2), principal point at the image
+    centre, zero distortion."""
     integers = isinstance(width, (int, np.integer)) and isinstance(height, (int, np.integer))
     if not integers or width <= 0 or height <= 0:
         raise CalibrationError(f"an estimated camera needs a positive integer image size, got {width}x{height}")
     if not 1.0 <= float(hfov_deg) <= 170.0:
         raise CalibrationError(f"horizontal field of view {hfov_deg} deg: use a value between 1 and 170 degrees")
-    f = (width / 2.0) / math.tan(math.radians(float(hfov_deg)) / 2.0)
+    f = (max(width, height) / 2.0) / math.tan(math.radians(float(hfov_deg)) / 2.0)
     K = np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
     return Camera(K, np.zeros(5), int(width), int(height))
 

@@ -55,9 +55,9 @@ class Input:
 
 def estimated_note(source: Source) -> str:
     """The line saying a source runs on the estimated camera, and how to calibrate it."""
-    return (f"{source.describe()}: no calibration, so the estimated camera ({DEFAULT_HFOV_DEG:g} deg horizontal "
-            "field of view, no distortion): sizes and distances are approximate. To calibrate: film the board "
-            "`arapp markers charuco -o board` prints from many sides, run `arapp calibrate --source VIDEO "
+    return (f"{source.describe()}: no calibration, so the estimated camera ({DEFAULT_HFOV_DEG:g} deg field of "
+            "view across the long side, no distortion): sizes and distances are approximate. To calibrate: film the "
+            "board `arapp markers charuco -o board` prints from many sides, run `arapp calibrate --source VIDEO "
             "--anchors board/*.anchors.json -o cam.yaml`, then add --calibration cam.yaml")
 
 

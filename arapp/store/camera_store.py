@@ -99,7 +99,7 @@ def attach_camera(source) -> str:
             note("calibration", f"stored {found[1].name}")
             return STORED
     if attach_estimated_camera(source) or getattr(source, "camera_estimated", False):
-        note("calibration", f"estimated: pinhole, {DEFAULT_HFOV_DEG:g} deg horizontal field of view, "
+        note("calibration", f"estimated: pinhole, {DEFAULT_HFOV_DEG:g} deg field of view across the long side, "
                             "no distortion")
         return ESTIMATED
     return OWN
