@@ -150,11 +150,31 @@ def _open_capture(path: Path) -> cv2.VideoCapture:
     return cap
 
 
+# codec tags as containers write them, by the name people know them by
+CODEC_NAMES = {"av01": "AV1", "hvc1": "HEVC", "hev1": "HEVC", "hevc": "HEVC", "vp09": "VP9", "vp80": "VP8",
+               "avc1": "H.264", "h264": "H.264", "mp4v": "MPEG-4", "mjpg": "Motion JPEG", "ffv1": "FFV1"}
+
+
+def codec_name(cap: cv2.VideoCapture) -> str:
+    """The video's codec as its four-character tag says (and its common name when known), or "unknown"."""
+    tag = int(cap.get(cv2.CAP_PROP_FOURCC) or 0)
+    text = "".join(chr((tag >> (8 * k)) & 0xFF) for k in range(4)).strip("\x00 ")
+    if not text.isprintable() or not text:
+        return "unknown"
+    name = CODEC_NAMES.get(text.lower())
+    return f"{name}, '{text}'" if name else f"'{text}'"
+
+
 def _probe_first_frame(cap: cv2.VideoCapture, path: Path) -> np.ndarray:
     ok, img = cap.read()
     if not ok or img is None:
+        codec = codec_name(cap)
         cap.release()
-        raise SourceError(f"{path}: the video opens but no frame can be decoded (corrupt or truncated file)")
+        # a file OpenCV opens but cannot decode is as often a codec its FFmpeg build lacks (AV1 in the pip wheels)
+        # as a damaged file: both are said, with the conversion that fixes either
+        raise SourceError(f"{path}: the video opens but no frame can be decoded: OpenCV's FFmpeg may have no decoder "
+                          f"for its codec ({codec}), or the file is corrupt or truncated; convert it, e.g. "
+                          "`ffmpeg -i FILE -c:v libx264 out.mp4`")
     return img
 
 
