@@ -261,3 +261,20 @@ def test_gui_takes_anchors_and_calibration(tmp_path, capsys, monkeypatch):
     assert main(["gui", "--source", str(video), "--anchors", str(bad)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bad.json" in err[0]
+
+
+def test_a_variable_frame_rate_video_keeps_its_own_times(tmp_path, config_dir):
+    # tests/data/videos/tiny_vfr.mp4: FFmpeg was told frame n at n/30 s, 0.3 s later from frame 6 on (a phone
+    # dropping its rate in low light); the container's mean rate (12 frames in 0.7 s) would misplace every frame
+    from tracking.sources import open_source
+
+    video = Path(__file__).resolve().parent / "data" / "videos" / "tiny_vfr.mp4"
+    told = [n / 30 + (0.3 if n >= 6 else 0.0) for n in range(12)]
+    with open_source(str(video)) as src:
+        assert [f.t for f in src] == pytest.approx(told, abs=1e-6)
+    with open_source(f"file:{video}", fps=10.0) as src:   # a rate the user sets wins
+        assert [f.t for f in src] == pytest.approx([n / 10 for n in range(12)])
+    # a recording made from it keeps them (frames.csv)
+    assert main(["record", "--source", str(video), "--out", str(tmp_path / "rec")]) == 0
+    rows = (tmp_path / "rec" / "frames.csv").read_text().splitlines()[1:]
+    assert [float(r.split(",")[1]) for r in rows] == pytest.approx(told, abs=1e-4)
