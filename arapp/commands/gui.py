@@ -9,7 +9,8 @@ def add_arguments(parser):
                         "or ROS camera_info YAML); the same as SPEC?calibration=FILE")
     parser.add_argument("--anchors", help="JSON file with the anchors to track (a list as in session.json, e.g. what "
                         "`arapp markers` wrote); remembered, as Tracking > Anchors does; a recording keeps its own")
-    parser.add_argument("--model", help="model to show (NURBS JSON or STL/OBJ/PLY/3MF/GLB, or a library model's name: vase)")
+    parser.add_argument("--model", help="model to show (NURBS JSON or STL/OBJ/PLY/3MF/GLB, or a library model's "
+                        "name: vase)")
     parser.add_argument("--frames", type=int, help="show this many frames, then exit (with --screenshot: save it)")
     parser.add_argument("--screenshot", metavar="OUT.png", help="with --frames: save a picture of the whole window")
     parser.add_argument("--toolpaths", metavar="GCODE", help="print preview: draw this G-code's toolpaths on the "

@@ -8,7 +8,8 @@ def add_arguments(parser):
     info = sub.add_parser("info", help="surfaces, degrees, domains, bounding box, triangle count",
                           description="Print the surfaces, degrees, domains, bounding box and the "
                           "triangle count at default quality of a model file (.json or a mesh).")
-    info.add_argument("path", help="model file: .json (arapp model) or .stl/.obj/.ply/.3mf/.glb, or a library model's name (vase)")
+    info.add_argument("path", help="model file: .json (arapp model) or .stl/.obj/.ply/.3mf/.glb, or a library "
+                      "model's name (vase)")
     export = sub.add_parser("export", help="write a watertight solid in millimetres",
                             description="Write the model as a watertight solid in millimetres, scaled "
                             "to its placement size (or --size), open surfaces thickened.")

@@ -20,7 +20,8 @@ def add_arguments(parser):
     parser.add_argument("--out", help="output folder (created; an existing one has its outputs replaced); default "
                         "out/replay-NAME in the current folder, NAME the recording's or video's name")
     parser.add_argument("--no-video", action="store_true", help="skip overlay.mp4 (faster)")
-    parser.add_argument("--model", help="model to draw on the anchor (NURBS JSON or STL/OBJ/PLY/3MF/GLB, or a library model's name: vase)")
+    parser.add_argument("--model", help="model to draw on the anchor (NURBS JSON or STL/OBJ/PLY/3MF/GLB, or a library "
+                        "model's name: vase)")
     parser.add_argument("--size", type=float, help="model size on the anchor in mm (default: the model's own)")
     parser.add_argument("--mode", default="shaded", choices=["shaded", "wireframe", "isolines", "translucent"],
                         help="display mode of the model")

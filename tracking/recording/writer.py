@@ -211,7 +211,8 @@ def _write_frames(source, writer: RecordingWriter, stop: dict, seconds: float | 
 
 def record(source, folder: str | Path, anchors: list | None = None, seconds: float | None = None,
            max_frames: int | None = None, force: bool = False, fourcc: str = "MJPG", quality: int = 90,
-           progress: Callable[[str], None] | None = None, depth: bool = True, name: str | Path | None = None) -> Session:
+           progress: Callable[[str], None] | None = None, depth: bool = True,
+           name: str | Path | None = None) -> Session:
     """Record frames from `source` (a tracking.sources Source) into `folder` until it ends,
     `seconds` of frame time or `max_frames` have passed, or Ctrl-C (which finishes the file cleanly).
 
