@@ -52,17 +52,22 @@ def build_parser() -> argparse.ArgumentParser:
 
 def show_source_warnings(command: str) -> None:
     """Show a source's warnings (a video that stops decoding early) as one line naming the command, instead of
-    Python's two lines with a line of arapp's own code."""
+    Python's two lines with a line of arapp's own code. Installed once however often main() runs (the tests call
+    it many times in one process): later calls only rename the command."""
     from tracking.sources import SourceWarning
 
     shown = warnings.showwarning
+    if getattr(shown, "arapp_command", None) is not None:
+        shown.arapp_command = command
+        return
 
     def show(message, category, filename, lineno, file=None, line=None):
         if issubclass(category, SourceWarning):
-            print(f"arapp {command}: warning: {message}", file=sys.stderr)
+            print(f"arapp {show.arapp_command}: warning: {message}", file=sys.stderr)
         else:
             shown(message, category, filename, lineno, file, line)
 
+    show.arapp_command = command
     warnings.showwarning = show
 
 
