@@ -3,6 +3,7 @@ phone's variable frame rate kept), from 0 at the first frame."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Iterator
 
@@ -54,7 +55,7 @@ class VideoFileSource(Source):
                 t = i / self.fps
             else:
                 stamp = self._cap.get(cv2.CAP_PROP_POS_MSEC) / 1000.0
-                if first is None and stamp >= 0.0:
+                if first is None and math.isfinite(stamp):   # (an edit list may start it below 0)
                     first = stamp
                 own = stamp - first if first is not None else float("nan")
                 # the container's time when it has one that goes forward, else one frame period on
