@@ -199,3 +199,22 @@ def test_toy_kind_is_tracked_at_its_true_pose(domino, tilt_deg):
     # measured 0.09 / 0.04 mm and 0.012 / 0.004 degrees (face-on / tilted)
     assert pos_err < 0.0003, f"position off by {pos_err * 1000:.2f} mm"
     assert rot_err < 0.04, f"rotation off by {rot_err:.3f} degrees"
+
+
+@pytest.mark.parametrize("block, field", [
+    ({"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 3, "length": 40}, "length"),
+    ({"kind": "aruco_board", "dictionary": "DICT_4X4_50", "markers_x": 5, "markers_y": 7, "marker_length": 0.04,
+      "separation": 10}, "separation"),
+    ({"kind": "charuco", "dictionary": "DICT_4X4_50", "squares_x": 5, "squares_y": 7, "square_length": 0.03,
+      "marker_length": 22}, "marker_length"),
+])
+def test_a_length_typed_in_millimetres_is_refused_saying_metres(block, field):
+    # the rule: no printed anchor is 5 m long; 40 (mm meant) would put the camera hundreds of metres off
+    from tracking.errors import SessionError
+    from tracking.recording.schema import parse_anchors
+
+    value = block[field]
+    with pytest.raises(SessionError, match=rf"^anchors\[0\]\.{field}: {value} m is larger than any printed anchor; "
+                                            rf"lengths are in metres \({value} mm is {value / 1000:g}\)$"):
+        parse_anchors([block])
+    assert parse_anchors([{**block, field: 5.0}])   # a poster-sized board is still taken

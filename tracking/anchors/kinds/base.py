@@ -29,6 +29,10 @@ ANY_KIND_KEYS = ("kind", "world_from_anchor")
 POLARITIES = ("auto", "normal", "inverted")
 
 
+# the largest length (metres) an anchor's field may have: a poster-sized board, with room
+MAX_LENGTH_M = 5.0
+
+
 def mm(metres: float) -> str:
     """'50 mm' for 0.05 (metres shown in millimetres, as users measure prints)."""
     return f"{metres * 1000:g} mm"
@@ -124,6 +128,11 @@ class AnchorKind:
         for key in self.non_negative:
             if values[key] < 0:
                 raise SessionError(f"{where}.{key}: must not be negative")
+        for key in self.positive + self.non_negative:
+            if key in values and values[key] > MAX_LENGTH_M:
+                # a length typed in millimetres (40 for a 40 mm marker) would put the camera hundreds of metres off
+                raise SessionError(f"{where}.{key}: {values[key]:g} m is larger than any printed anchor; lengths are "
+                                   f"in metres ({values[key]:g} mm is {values[key] / 1000:g})")
         if values.get("polarity", "auto") not in POLARITIES:
             raise SessionError(f"{where}.polarity: must be one of {', '.join(POLARITIES)} (\"inverted\": white "
                                f"markers on black), got {values['polarity']!r}")
