@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from tracking.anchors.kinds import AnchorSpec
-from tracking.anchors.kinds.charuco import charuco_board
+from tracking.anchors.kinds.charuco import charuco_board, is_legacy
 from tracking.calibration_quality import (
     CORNERS,
     PARAMS,
@@ -43,6 +43,7 @@ class BoardSpec:
     marker_length: float | None = None
     dictionary: str = "DICT_5X5_100"
     first_id: int = 0
+    legacy: bool = False   # the ChArUco pattern of OpenCV before 4.6 (tracking/anchors/kinds/charuco.py)
 
     @classmethod
     def from_anchor(cls, spec: AnchorSpec, where: str = "anchors") -> "BoardSpec":
@@ -51,7 +52,7 @@ class BoardSpec:
             raise CalibrationError(f"{where}: a {spec.kind} anchor is not a calibration board; calibrate with a "
                                    "charuco one (`arapp markers charuco` prints one and writes its anchors file)")
         return cls("charuco", spec.squares_x, spec.squares_y, spec.square_length, spec.marker_length, spec.dictionary,
-                   spec.first_id)
+                   spec.first_id, is_legacy(spec))
 
     def __post_init__(self):
         if self.kind not in ("charuco", "chessboard"):
@@ -70,7 +71,8 @@ class BoardSpec:
         """The OpenCV board, made as a `charuco` anchor's (tracking/anchors/kinds/charuco.py), ids from 0."""
         return charuco_board(AnchorSpec("charuco", dictionary=self.dictionary, squares_x=self.squares_x,
                                         squares_y=self.squares_y, square_length=self.square_length,
-                                        marker_length=self.marker_length, first_id=self.first_id))
+                                        marker_length=self.marker_length, first_id=self.first_id,
+                                        params={"legacy": True} if self.legacy else {}))
 
     def corner_count(self) -> int:
         return (self.squares_x - 1) * (self.squares_y - 1)

@@ -63,6 +63,7 @@ class OpenCVReference:
             ids = np.arange(spec.first_id, spec.first_id + n, dtype=np.int32)
             self.board = cv2.aruco.CharucoBoard((spec.squares_x, spec.squares_y), spec.square_length,
                                                 spec.marker_length, d, ids)
+            self.board.setLegacyPattern(bool(spec.params.get("legacy", False)))
             self.det = cv2.aruco.CharucoDetector(self.board, cv2.aruco.CharucoParameters(), params)
         else:
             raise ValueError(f"no OpenCV reference for {self.kind!r} anchors (aruco, aruco_board, charuco)")

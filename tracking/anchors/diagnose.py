@@ -21,6 +21,7 @@ import json
 from tracking.anchors.detect import ARUCO_FAMILIES, ArucoDetection
 from tracking.anchors.discover import DEFAULT_MARKER_M, Discovery, Suggestion, family_of, id_span
 from tracking.anchors.kinds.base import mm
+from tracking.anchors.kinds.charuco import is_legacy
 from tracking.anchors.kinds.qr import normal_text
 from tracking.anchors.model import build_models
 from tracking.anchors.pose import solve_pose
@@ -177,7 +178,8 @@ def why_untracked(anchors: list[AnchorSpec], found: Discovery, default_anchors: 
                                f"{' (white on black)' if pol == 'inverted' else ''}, but anchors[{i}].polarity is "
                                f"{a.polarity!r}: set it to {pol!r} or \"auto\"")
             elif hit:
-                reasons.append(f"anchors[{i}]'s markers were seen (ids {id_span(sorted(hit))}) but gave no pose: "
+                reasons.append(_pattern_hint(a, i, found, hit) or
+                               f"anchors[{i}]'s markers were seen (ids {id_span(sorted(hit))}) but gave no pose: "
                                f"too few, too small or too blurred (hold the sheet closer and steadier)")
             else:
                 reasons.append(f"{a.dictionary.rsplit('_', 1)[0] if family else a.dictionary} markers seen with ids "
@@ -195,6 +197,22 @@ def why_untracked(anchors: list[AnchorSpec], found: Discovery, default_anchors: 
     if not seen and not texts:
         reasons.append(f"no marker or QR code of any dictionary seen ({looked}, both polarities)")
     return reasons
+
+
+def _pattern_hint(a: AnchorSpec, i: int, found: Discovery, hit: set) -> str | None:
+    """For a ChArUco anchor (anchors[i]) whose markers were seen but gave no pose: what to change when discovery
+    found the board printed in the other pattern (OpenCV's legacy one before 4.6, or today's); else None."""
+    if a.kind != "charuco":
+        return None
+    for s in found.suggestions():
+        b = s.block
+        if s.kind == "charuco" and (b["squares_x"], b["squares_y"]) == (a.squares_x, a.squares_y) and \
+                bool(b.get("legacy")) != is_legacy(a):
+            change = 'add "legacy": true to it' if b.get("legacy") else 'drop its "legacy"'
+            old = "the legacy pattern of OpenCV before 4.6" if b.get("legacy") else "today's pattern (OpenCV 4.6 on)"
+            return (f"anchors[{i}]'s markers were seen (ids {id_span(sorted(hit))}), but the board is printed in "
+                    f"{old}: {change}")
+    return None
 
 
 def why_line(anchors: list[AnchorSpec], found: Discovery, default_anchors: bool = False) -> str:

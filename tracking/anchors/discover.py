@@ -326,10 +326,12 @@ def _marker_fraction(H: np.ndarray, quads: np.ndarray) -> float:
 
 
 @lru_cache(maxsize=256)
-def _charuco_centres(sx: int, sy: int) -> np.ndarray:
-    """Centres (in squares) of the markers of an OpenCV sx x sy ChArUco board, in id order."""
+def _charuco_centres(sx: int, sy: int, legacy: bool = False) -> np.ndarray:
+    """Centres (in squares) of the markers of an OpenCV sx x sy ChArUco board, in id order (`legacy`: in the
+    pattern of OpenCV before 4.6, tracking/anchors/kinds/charuco.py)."""
     d = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_1000)
     b = cv2.aruco.CharucoBoard((sx, sy), 1.0, 0.5, d, np.arange((sx * sy) // 2, dtype=np.int32))
+    b.setLegacyPattern(legacy)
     return np.asarray(b.getObjPoints(), float).reshape(-1, 4, 3).mean(axis=1)[:, :2]
 
 
@@ -356,12 +358,16 @@ def board_from_markers(family: str, polarity: str, ids: np.ndarray, quads: np.nd
         sy = 2
         while (sx * sy) // 2 < top + 1:
             sy += 1
-        err, H = _fit(_charuco_centres(sx, sy)[ids], quads)
-        if err < FIT_TOLERANCE and (best is None or err < best[0] - 0.02) and _upright(H, quads):
-            best = (err, "charuco", sx, sy, H)
+        # the legacy pattern (OpenCV before 4.6) differs from today's only with an even number of rows
+        for legacy in (False, True) if sy % 2 == 0 else (False,):
+            err, H = _fit(_charuco_centres(sx, sy, legacy)[ids], quads)
+            if err < FIT_TOLERANCE and (best is None or err < best[0] - 0.02) and _upright(H, quads):
+                best = (err, "charuco-legacy" if legacy else "charuco", sx, sy, H)
     if best is None:
         return None
     _, kind, nx, ny, H = best
+    legacy = kind == "charuco-legacy"
+    kind = "charuco" if legacy else kind
     frac = _marker_fraction(H, quads)
     dictionary = smallest_dictionary(family, ids.tolist())
     L = DEFAULT_MARKER_M
@@ -376,7 +382,11 @@ def board_from_markers(family: str, polarity: str, ids: np.ndarray, quads: np.nd
         square = round(L / frac * 2000) / 2000
         block = {"kind": "charuco", "dictionary": dictionary, "squares_x": nx, "squares_y": ny,
                  "square_length": square, "marker_length": L, "first_id": 0}
-        summary = f"a {nx}x{ny} ChArUco {dictionary} board (ids 0-{(nx * ny) // 2 - 1}){inverted}"
+        old = ""
+        if legacy:
+            block["legacy"] = True
+            old = " in the legacy pattern (OpenCV before 4.6)"
+        summary = f"a {nx}x{ny} ChArUco {dictionary} board{old} (ids 0-{(nx * ny) // 2 - 1}){inverted}"
     if polarity == "inverted":
         block["polarity"] = "inverted"
     return Suggestion(kind, summary, block, "marker_length", markers=len(ids), dictionary=dictionary,

@@ -1,5 +1,9 @@
 """`charuco`: an OpenCV CharucoBoard (chessboard with ArUco markers in its white squares); OpenCV's
-board frame (origin at the board's top-left outer corner, x right, y down, z into the paper)."""
+board frame (origin at the board's top-left outer corner, x right, y down, z into the paper).
+
+`"legacy": true` names a board printed in the pattern of OpenCV before 4.6 (and of the tools that copied
+it): with an even number of rows its chessboard starts with a white square where today's starts black, so
+the markers sit in other squares and today's detector finds them but no corner."""
 
 from __future__ import annotations
 
@@ -22,7 +26,14 @@ def charuco_board(spec) -> cv2.aruco.CharucoBoard:
     d = aruco_dictionary(spec.dictionary)
     n = (spec.squares_x * spec.squares_y) // 2
     ids = np.arange(spec.first_id, spec.first_id + n, dtype=np.int32)
-    return cv2.aruco.CharucoBoard((spec.squares_x, spec.squares_y), spec.square_length, spec.marker_length, d, ids)
+    board = cv2.aruco.CharucoBoard((spec.squares_x, spec.squares_y), spec.square_length, spec.marker_length, d, ids)
+    board.setLegacyPattern(is_legacy(spec))
+    return board
+
+
+def is_legacy(spec) -> bool:
+    """Whether a `charuco` anchor's board has the pattern of OpenCV before 4.6 (its "legacy" field)."""
+    return bool(spec.params.get("legacy", False))
 
 
 class CharucoKind(AnchorKind):
@@ -31,6 +42,7 @@ class CharucoKind(AnchorKind):
     name = "charuco"
     required = {"dictionary": str, "squares_x": int, "squares_y": int, "square_length": float,
                 "marker_length": float}
+    optional = {"first_id": int, "polarity": str, "legacy": bool}
     written = ("first_id",)
     positive = ("square_length", "marker_length")
     counts = ("squares_x", "squares_y")
@@ -70,7 +82,7 @@ class CharucoKind(AnchorKind):
 
     def describe(self, spec):
         return (f"ChArUco board {spec.squares_x} x {spec.squares_y}, {spec.dictionary}, "
-                f"{mm(spec.square_length)} squares")
+                f"{mm(spec.square_length)} squares" + (", legacy pattern" if is_legacy(spec) else ""))
 
     def caption(self, spec):
         return (f"ChArUco {spec.squares_x}x{spec.squares_y} {spec.dictionary} first id {spec.first_id}, squares "
