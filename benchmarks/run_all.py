@@ -56,7 +56,7 @@ def split_sections(text: str) -> dict[str, str]:
 def marked(name: str, text: str, when: str) -> str:
     """A section with its module mark under the heading and the time it was measured at the end."""
     head, _, body = text.strip().partition("\n")
-    return f"{head}\n<!-- bench: {name} -->\n{body.strip()}\n\n*Section measured {when}.*\n"
+    return f"{head}\n<!-- bench: {name} -->\n{body.strip()}\n\n*Section measured {when} on {machine()}.*\n"
 
 
 def main(argv=None) -> int:
@@ -100,7 +100,10 @@ def main(argv=None) -> int:
         f"Written by `make bench` on {when}"
         + (" (re-measuring only " + ", ".join(names) + "; each section says when it was measured)" if kept else "")
         + ".\n\n"
-        f"Machine: {machine()}. No GPU machine was used for these figures unless a section says so.\n"
+        f"Machine: {machine()}"
+        + (" (this run's; a section kept from an earlier run may come from another machine, its last line says "
+           "when, and since 2026-12-08 which)" if kept else "")
+        + ". No GPU machine was used for these figures unless a section says so.\n"
         "Absolute times on these shared machines are noisy; each section compares arapp with its peer "
         "measured in the same run, and the ratios are what to read.\n\n"
     )

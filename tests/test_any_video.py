@@ -278,3 +278,54 @@ def test_a_variable_frame_rate_video_keeps_its_own_times(tmp_path, config_dir):
     assert main(["record", "--source", str(video), "--out", str(tmp_path / "rec")]) == 0
     rows = (tmp_path / "rec" / "frames.csv").read_text().splitlines()[1:]
     assert [float(r.split(",")[1]) for r in rows] == pytest.approx(told, abs=1e-4)
+
+
+def _turn_pixels(uv, height, turns):
+    """Pixel positions after cv2.rotate(ROTATE_90_CLOCKWISE) `turns` times of an image `height` rows high (the
+    rule of a clockwise turn: (u, v) -> (h - 1 - v, u), the height becoming the width)."""
+    uv = np.asarray(uv, float)
+    for _ in range(turns):
+        uv = np.c_[height - 1 - uv[:, 1], uv[:, 0]]
+    return uv
+
+
+@pytest.mark.parametrize("turns", [1, 2, 3])
+def test_a_turned_camera_projects_where_the_turned_image_has_the_point(turns):
+    from tracking.camera import Camera
+
+    K = np.array([[910.0, 0.0, 652.0], [0.0, 905.0, 371.0], [0.0, 0.0, 1.0]])
+    dist = np.array([-0.28, 0.09, 0.004, -0.0025, -0.01])
+    cam = Camera(K, dist, 1280, 720)
+    rng = np.random.default_rng(4)
+    pts = np.c_[rng.uniform(-0.4, 0.4, (60, 2)), rng.uniform(0.5, 2.0, 60)]
+    before, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), K, dist)
+    want = _turn_pixels(before.reshape(-1, 2), 720, 1)
+    h = 1280
+    for _ in range(turns - 1):   # (each turn: the new height is the old width)
+        want = _turn_pixels(want, h, 1)
+        h = 720 if h == 1280 else 1280
+    turned = cam.turned(turns)
+    R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])   # x' = -y, y' = x: one clockwise turn
+    got, _ = cv2.projectPoints(pts @ np.linalg.matrix_power(R, turns).T, np.zeros(3), np.zeros(3), turned.K,
+                               turned.dist)
+    assert (turned.width, turned.height) == ((720, 1280) if turns % 2 else (1280, 720))
+    np.testing.assert_allclose(got.reshape(-1, 2), want, atol=1e-6)
+
+
+def test_an_upright_phone_video_takes_its_landscape_calibration_turned(tmp_path):
+    # tests/data/videos/tiny_turned.mp4: stored 64x48 with a 90-degree display rotation; OpenCV turns it (to
+    # 48x64, counter-clockwise); a calibration made at 64x48 (as the sensor lies) is turned with it, and said
+    from tracking.camera import Camera
+    from tracking.sources import open_source
+
+    video = Path(__file__).resolve().parent / "data" / "videos" / "tiny_turned.mp4"
+    K = np.array([[60.0, 0.0, 33.0], [0.0, 61.0, 22.0], [0.0, 0.0, 1.0]])
+    Camera(K, np.array([-0.2, 0.05, 0.001, 0.002, 0.0]), 64, 48).save_yaml(tmp_path / "cam.yaml")
+    with open_source(f"file:{video}?calibration={tmp_path / 'cam.yaml'}") as src:
+        frame = next(iter(src))
+        cam = src.camera
+        assert frame.image.shape[:2] == (64, 48) and (cam.width, cam.height) == (48, 64)
+        # one counter-clockwise turn, by the rule written out: pixel (u, v) -> (v, w - 1 - u)
+        np.testing.assert_allclose(cam.K, [[61.0, 0.0, 22.0], [0.0, 60.0, 64 - 1 - 33.0], [0.0, 0.0, 1.0]])
+        np.testing.assert_allclose(cam.dist[2:4], [-0.002, 0.001])
+        assert any("turned 90 degrees counter-clockwise" in note for note in src.notes)

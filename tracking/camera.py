@@ -148,6 +148,27 @@ class Camera:
         K[1, 2] = (K[1, 2] + 0.5) * sy - 0.5
         return Camera(K, self.dist.copy(), width, height, self.readout)
 
+    def turned(self, quarter_turns: int) -> "Camera":
+        """The same camera for its images turned `quarter_turns` x 90 degrees clockwise (cv2.rotate's
+        ROTATE_90_CLOCKWISE, repeated): a video a phone recorded upright, which the decoder turns by its
+        rotation tag. One turn maps pixel (u, v) to (h - 1 - v, u) and the camera's x, y to -y, x: fx and fy
+        swap, the principal point moves with the pixels, the radial terms stay and the tangential ones turn
+        (p1, p2 -> p2, -p1). CalibrationError for a skewed matrix or thin-prism / tilt terms (no such turn)."""
+        k = int(quarter_turns) % 4
+        if k == 0:
+            return self
+        if self.K[0, 1] != 0.0 or self.dist.size > 8:
+            raise CalibrationError("cannot turn a calibration with skew or thin-prism / tilt distortion terms; "
+                                   "calibrate on the turned video itself")
+        cam = self
+        for _ in range(k):
+            K, d = cam.K, cam.dist.copy()
+            turned = np.array([[K[1, 1], 0.0, cam.height - 1 - K[1, 2]], [0.0, K[0, 0], K[0, 2]], [0.0, 0.0, 1.0]])
+            d[2], d[3] = cam.dist[3], -cam.dist[2]
+            # (readout 0: a turned image's rows are not read top to bottom, which the row model assumes)
+            cam = Camera(turned, d, cam.height, cam.width, 0.0)
+        return cam
+
     # -- files -----------------------------------------------------------------
     def to_dict(self) -> dict:
         """The `camera` block of session.json."""

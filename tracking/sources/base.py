@@ -186,15 +186,26 @@ def _as_bgr(img: np.ndarray) -> np.ndarray:
     return img
 
 
-def _calibrated(calibration, width: int, height: int, what: str) -> tuple[Camera, list[str]]:
+def _calibrated(calibration, width: int, height: int, what: str, turns: int = 0) -> tuple[Camera, list[str]]:
     """(the camera of `calibration` (a Camera, or a file tracking.calibration_file reads) at the stream's size
     (_fit_camera), the notes a user should read about the file). A file without an image size is taken at
-    width x height, which a note says."""
+    width x height, which a note says. `turns`: quarter turns clockwise the decoder gave the stored frames (a
+    video's rotation tag)."""
     if isinstance(calibration, Camera):
         cam, notes = calibration, []
     else:
         cam, notes = Camera.load_file(calibration, (width, height))
+    if turns % 2 and _aspect(cam.width, cam.height) != _aspect(width, height) and \
+            _aspect(cam.height, cam.width) == _aspect(width, height):
+        # calibrated as the sensor lies, filmed upright: the frames come turned by the file's rotation tag
+        cam = cam.turned(turns)
+        way = "90 degrees counter-clockwise" if turns % 4 == 3 else "90 degrees clockwise"
+        notes = notes + [f"{calibration}: turned {way} with {what}'s rotation tag (the video was filmed upright)"]
     return _fit_camera(cam, width, height, str(calibration), what), notes
+
+
+def _aspect(width: int, height: int) -> float:
+    return round(width / height, 3)
 
 
 def _fit_camera(cam: Camera, width: int, height: int, calib_name: str, what: str) -> Camera:

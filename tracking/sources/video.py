@@ -35,8 +35,10 @@ class VideoFileSource(Source):
         self._own_times = fps is None   # the container's timestamps unless a rate is given
         n = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT))
         self.frame_count = n if n > 0 else None
+        # quarter turns clockwise OpenCV gives the stored frames (a phone's rotation tag: 90 clockwise, 270 back)
+        self.turns = int(round(self._cap.get(cv2.CAP_PROP_ORIENTATION_META) or 0) // 90) % 4
         if calibration is not None:
-            self._camera, self.notes = _calibrated(calibration, self.width, self.height, str(self.path))
+            self._camera, self.notes = _calibrated(calibration, self.width, self.height, str(self.path), self.turns)
         self.info = {"kind": "file", "path": str(self.path)}
 
     def describe(self) -> str:
