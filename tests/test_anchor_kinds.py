@@ -9,6 +9,7 @@ ArucoDetector on the printed sheet; strings and file names written out here.
 from __future__ import annotations
 
 import argparse
+import json
 
 import cv2
 import numpy as np
@@ -218,3 +219,34 @@ def test_a_length_typed_in_millimetres_is_refused_saying_metres(block, field):
                                             rf"lengths are in metres \({value} mm is {value / 1000:g}\)$"):
         parse_anchors([block])
     assert parse_anchors([{**block, field: 5.0}])   # a poster-sized board is still taken
+
+
+@pytest.mark.parametrize("typed, meant", [("DICT_6x6_50", "DICT_6X6_50"), ("4X4_50", "DICT_4X4_50"),
+                                          ("DICT_5X5_10O", "DICT_5X5_100")])
+def test_a_dictionary_name_typed_nearly_right_is_named(typed, meant):
+    from tracking.errors import SessionError
+    from tracking.recording.schema import parse_anchors
+
+    with pytest.raises(SessionError, match=rf"'{typed}' is not an OpenCV ArUco dictionary; did you mean '{meant}'\?"):
+        parse_anchors([{"kind": "aruco", "dictionary": typed, "id": 3, "length": 0.05}])
+    with pytest.raises(SessionError, match=r"is not an OpenCV ArUco dictionary; use one of"):
+        parse_anchors([{"kind": "aruco", "dictionary": "MY_MARKERS", "id": 3, "length": 0.05}])
+
+
+def test_json_saved_with_a_byte_order_mark_is_read(tmp_path):
+    # Windows editors save UTF-8 with a byte-order mark: an anchors file and a session.json edited there
+    from tracking.jsonfile import read_json
+    from tracking.recording.schema import load_session
+
+    block = [{"kind": "aruco", "dictionary": "DICT_4X4_50", "id": 3, "length": 0.05}]
+    path = tmp_path / "anchors.json"
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps(block).encode())
+    assert read_json(path, "anchors file", expect=list) == block
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    session = {"format": "arapp-recording/1", "video": "video.avi", "fps": 30.0,
+               "camera": {"width": 64, "height": 48, "K": [[50, 0, 32], [0, 50, 24], [0, 0, 1]], "dist": [0] * 5},
+               "anchors": block}
+    (rec / "session.json").write_bytes(b"\xef\xbb\xbf" + json.dumps(session).encode())
+    loaded = load_session(rec)
+    assert loaded.fps == 30.0 and loaded.anchors[0].id == 3

@@ -15,7 +15,7 @@ def read_json(path, what: str, error: type[Exception] = ValueError, expect: type
     """The parsed JSON of `path`, a `what` (e.g. "printer profile"); `expect`: the top-level type wanted."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")   # (a byte-order mark, as Windows editors save UTF-8, is dropped)
     except FileNotFoundError:
         raise error(f"{p}: no such {what} file") from None
     except IsADirectoryError:

@@ -141,7 +141,7 @@ def load_session(folder: str | Path) -> Session:
     if not path.is_file():
         raise SessionError(f"{folder}: no session.json; a recording folder needs session.json and its video")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json.loads(path.read_text(encoding="utf-8-sig"))   # (a byte-order mark, as Windows editors write)
     except json.JSONDecodeError as e:
         raise SessionError(f"{path}: invalid JSON at line {e.lineno}, column {e.colno}: {e.msg}") from None
     except UnicodeDecodeError as e:

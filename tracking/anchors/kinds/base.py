@@ -11,6 +11,7 @@ this package, one module per kind, registered in its `__init__.py`.
 
 from __future__ import annotations
 
+import difflib
 import math
 from pathlib import Path
 
@@ -148,8 +149,12 @@ class AnchorKind:
             return str((Path(folder or ".") / name).resolve())
         names = aruco_dictionary_names()
         if name not in names:
+            # a name typed by hand is most often right but for its case or its prefix (DICT_6x6_50, 4X4_50)
+            near = [n for n in names if n.upper() in (name.upper(), "DICT_" + name.upper())]
+            near = near or difflib.get_close_matches(name.upper(), names, n=1, cutoff=0.8)
+            hint = f"did you mean {near[0]!r}? Or use" if near else "use"
             raise SessionError(f"{where}.dictionary: {name!r} is not an OpenCV ArUco dictionary; "
-                               f"use one of {', '.join(names[:6])}, ... or a dictionary file (.yml)")
+                               f"{hint} one of {', '.join(names[:6])}, ... or a dictionary file (.yml)")
         return name
 
     def check(self, spec: AnchorSpec, where: str) -> None:
