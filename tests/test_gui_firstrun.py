@@ -270,3 +270,22 @@ def test_a_portrait_frame_is_the_same_sensor_turned():
     assert portrait.fx == portrait.fy == landscape.fx == pytest.approx(960 / math.tan(math.radians(32.5)))
     ray = np.array([[0.0, -math.tan(math.radians(DEFAULT_HFOV_DEG) / 2), 1.0]])
     assert abs(portrait.project(ray)[0, 1] - (-0.5)) < 1e-9
+
+
+def test_no_display_is_said_in_one_line_before_any_window(monkeypatch, capsys):
+    # `arapp` over ssh without X: a window on Qt's offscreen platform would run unseen until killed
+    import sys
+
+    from arapp.cli import main
+
+    for name in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setattr(sys, "platform", "linux")
+    shown = []
+    monkeypatch.setattr("arapp.gui.app.run_gui", lambda **kw: shown.append(kw) or 0)
+    assert main(["gui"]) == 2 and not shown
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("arapp gui: error: no display to show the window on") and "\n" not in err
+    assert main(["gui", "--frames", "1"]) == 0 and len(shown) == 1   # headless pictures still run
+    monkeypatch.setenv("QT_QPA_PLATFORM", "vnc")   # a platform chosen on purpose is taken
+    assert main(["gui"]) == 0 and len(shown) == 2

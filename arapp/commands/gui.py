@@ -21,6 +21,16 @@ def add_arguments(parser):
                         "shows its model where it was left (File > Save scene writes one; docs/scene-format.md)")
 
 
+def no_display() -> bool:
+    """Linux with neither an X nor a Wayland display, and no Qt platform chosen (QT_QPA_PLATFORM)."""
+    import os
+    import sys
+
+    env = os.environ
+    return (sys.platform.startswith("linux") and not env.get("DISPLAY") and not env.get("WAYLAND_DISPLAY")
+            and not env.get("QT_QPA_PLATFORM"))
+
+
 def run(args):
     from arapp.gui.app import run_gui
 
@@ -30,6 +40,10 @@ def run(args):
         raise ValueError("--screenshot needs --frames N (how many frames to show before the picture)")
     if frames is not None and frames < 1:
         raise ValueError(f"--frames must be at least 1, got {frames}")
+    if frames is None and no_display():
+        # (a window on Qt's offscreen platform would run unseen until killed: `arapp` over ssh without X)
+        raise RuntimeError("no display to show the window on (DISPLAY and WAYLAND_DISPLAY are unset): run arapp on "
+                           "a desktop or with ssh -X, or take a picture headless with --frames N --screenshot OUT.png")
     toolpaths, printer, layer = (getattr(args, k, None) for k in ("toolpaths", "printer", "layer"))
     source = getattr(args, "source", None)
     calibration, anchors = getattr(args, "calibration", None), None
