@@ -27,7 +27,7 @@ def build_menus(w) -> None:
     file_menu = mb.addMenu("&File")
     _action(w, "Open source...", w.choose_source, QKeySequence.StandardKey.Open, file_menu)
     _action(w, "Open recording folder...", w.choose_recording, None, file_menu)
-    _action(w, "Open video with calibration...", w.choose_video, None, file_menu)
+    _action(w, "Open video or photo with calibration...", w.choose_video, None, file_menu)
     _action(w, "Open model...", w.choose_model, "Ctrl+M", file_menu)
     w.recent_sources_menu = file_menu.addMenu("Recent sources")
     w.recent_models_menu = file_menu.addMenu("Recent models")

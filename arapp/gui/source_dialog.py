@@ -34,7 +34,7 @@ def ask_video(parent) -> tuple[str, str | None] | None:
     """Ask for a video (or one image), then its calibration YAML: (video, calibration or None); None when
     cancelled."""
     images = " ".join(f"*{s}" for s in IMAGE_SUFFIXES)
-    video, _ = QFileDialog.getOpenFileName(parent, "Open a video", str(Path.cwd()),
+    video, _ = QFileDialog.getOpenFileName(parent, "Open a video or a photo", str(Path.cwd()),
                                            f"Videos (*.mp4 *.mkv *.avi *.mov *.webm);;Images ({images});;All files (*)")
     if not video:
         return None
@@ -91,7 +91,7 @@ class SourceDialog(QDialog):
         row2 = QHBoxLayout()
         rec = QPushButton("Recording folder...")
         rec.clicked.connect(self._choose_recording)
-        vid = QPushButton("Video + calibration...")
+        vid = QPushButton("Video or photo + calibration...")
         vid.clicked.connect(self._choose_video)
         close = QPushButton("Close")
         close.clicked.connect(self.reject)
