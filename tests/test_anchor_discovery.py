@@ -164,3 +164,24 @@ def test_markers_that_fit_no_grid_are_no_board():
     rng = np.random.default_rng(3)
     quads = np.array([[[0, 0], [20, 0], [20, 20], [0, 20]]], float) + rng.uniform(0, 400, (6, 1, 2))
     assert board_from_markers("DICT_4X4_1000", "normal", np.arange(6), quads) is None
+
+
+def test_a_lone_marker_seen_once_is_looked_for_again_in_the_next_frame():
+    # a lone marker counts once seen in two frames (a look-alike square more likely otherwise); its pass comes
+    # first in the next frame looked at, so a three-second clip of one marker gets its offer (a whole round of
+    # the 21 passes takes five seconds at 4 frames a second, two passes each). Oracle: the marker drawn here.
+    d6 = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_6X6_250)
+    img = np.full((480, 640), 200, np.uint8)
+    img[140:340, 220:420] = 255
+    img[165:315, 245:395] = cv2.aruco.generateImageMarker(d6, 23, 150)
+    d = Discovery(rate_hz=4.0, passes_per_frame=2)
+    firsts = []
+    for k in range(12):   # 3 s at 4 looks a second
+        d.feed(img, k * 0.25)
+        seen = d.markers_seen
+        if seen and not firsts:
+            firsts.append(k)
+    # 24 passes, one of them the look again: 23 count toward the rounds
+    assert d.frames_looked == 12 and d.rounds == pytest.approx(23 / 21)
+    assert firsts and d.suggestions()[0].summary == "a DICT_6X6_50 marker, id 23"
+    assert d._frames[("DICT_6X6_1000", "normal")] >= 2

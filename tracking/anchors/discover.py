@@ -160,16 +160,24 @@ class Discovery:
         if self._last_t is not None and 0 <= t - self._last_t < 1.0 / self.rate_hz:
             return False
         self._last_t = t
-        passes = [PASSES[(self._next + k) % len(PASSES)] for k in range(self.passes_per_frame)]
-        self._next = (self._next + self.passes_per_frame) % len(PASSES)
-        self._look(gray, passes)
+        # a lone marker seen once counts only when seen again (markers_seen): its pass comes first in the next
+        # frame looked at, not a whole round (five seconds) later, which a short clip never reaches
+        again = [k for k, ids in self._ids.items() if self._frames[k] == 1 and len(ids) == 1][:1]
+        passes = list(again)
+        while len(passes) < self.passes_per_frame:
+            p = PASSES[self._next]
+            self._next = (self._next + 1) % len(PASSES)
+            if p not in passes:
+                passes.append(p)
+        self._look(gray, passes, rounds=(len(passes) - len(again)) / len(PASSES))
         return True
 
     def look_all(self, gray: np.ndarray) -> None:
         """Every pass (all families, both polarities, QR) on this frame."""
         self._look(gray, PASSES)
 
-    def _look(self, gray: np.ndarray, passes) -> None:
+    def _look(self, gray: np.ndarray, passes, rounds: float | None = None) -> None:
+        """Run `passes` on the frame; `rounds`: the part of a round of PASSES they count for (default: all)."""
         gray = gray if gray.ndim == 2 else cv2.cvtColor(gray, cv2.COLOR_BGR2GRAY)
         scale = min(1.0, self.max_side / max(gray.shape))
         small = gray if scale >= 1.0 else cv2.resize(gray, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
@@ -187,7 +195,7 @@ class Discovery:
             quads = np.concatenate(corners).reshape(-1, 4, 2).astype(np.float64) / scale
             sightings.append(Sighting(family, polarity, ids.ravel().astype(int), quads))
         self.frames_looked += 1
-        self.rounds += len(passes) / len(PASSES)
+        self.rounds += len(passes) / len(PASSES) if rounds is None else rounds
         for s in _claim(sightings):
             self._add(s, gray)
 
