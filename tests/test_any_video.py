@@ -280,12 +280,13 @@ def test_a_variable_frame_rate_video_keeps_its_own_times(tmp_path, config_dir):
     assert [float(r.split(",")[1]) for r in rows] == pytest.approx(told, abs=1e-4)
 
 
-def _turn_pixels(uv, height, turns):
-    """Pixel positions after cv2.rotate(ROTATE_90_CLOCKWISE) `turns` times of an image `height` rows high (the
-    rule of a clockwise turn: (u, v) -> (h - 1 - v, u), the height becoming the width)."""
+def _turn_pixels(uv, width, height, turns):
+    """Pixel positions after cv2.rotate(ROTATE_90_CLOCKWISE) `turns` times of a width x height image (the rule
+    of a clockwise turn: (u, v) -> (h - 1 - v, u), the height becoming the width)."""
     uv = np.asarray(uv, float)
     for _ in range(turns):
         uv = np.c_[height - 1 - uv[:, 1], uv[:, 0]]
+        width, height = height, width
     return uv
 
 
@@ -299,11 +300,7 @@ def test_a_turned_camera_projects_where_the_turned_image_has_the_point(turns):
     rng = np.random.default_rng(4)
     pts = np.c_[rng.uniform(-0.4, 0.4, (60, 2)), rng.uniform(0.5, 2.0, 60)]
     before, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), K, dist)
-    want = _turn_pixels(before.reshape(-1, 2), 720, 1)
-    h = 1280
-    for _ in range(turns - 1):   # (each turn: the new height is the old width)
-        want = _turn_pixels(want, h, 1)
-        h = 720 if h == 1280 else 1280
+    want = _turn_pixels(before.reshape(-1, 2), 1280, 720, turns)
     turned = cam.turned(turns)
     R = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])   # x' = -y, y' = x: one clockwise turn
     got, _ = cv2.projectPoints(pts @ np.linalg.matrix_power(R, turns).T, np.zeros(3), np.zeros(3), turned.K,

@@ -195,8 +195,8 @@ def _calibrated(calibration, width: int, height: int, what: str, turns: int = 0)
         cam, notes = calibration, []
     else:
         cam, notes = Camera.load_file(calibration, (width, height))
-    if turns % 2 and _aspect(cam.width, cam.height) != _aspect(width, height) and \
-            _aspect(cam.height, cam.width) == _aspect(width, height):
+    if turns % 2 and not _same_aspect(cam.width, cam.height, width, height) and \
+            _same_aspect(cam.height, cam.width, width, height):
         # calibrated as the sensor lies, filmed upright: the frames come turned by the file's rotation tag
         cam = cam.turned(turns)
         way = "90 degrees counter-clockwise" if turns % 4 == 3 else "90 degrees clockwise"
@@ -204,15 +204,16 @@ def _calibrated(calibration, width: int, height: int, what: str, turns: int = 0)
     return _fit_camera(cam, width, height, str(calibration), what), notes
 
 
-def _aspect(width: int, height: int) -> float:
-    return round(width / height, 3)
+def _same_aspect(w1: int, h1: int, w2: int, h2: int) -> bool:
+    """Whether two image sizes have one aspect ratio (to 1e-3: 1280x720 and 1920x1080 do)."""
+    return abs(w1 / h1 - w2 / h2) <= 1e-3
 
 
 def _fit_camera(cam: Camera, width: int, height: int, calib_name: str, what: str) -> Camera:
     """The calibration at the stream's size: scaled when the aspect matches, else an error."""
     if (cam.width, cam.height) == (width, height):
         return cam
-    if abs(cam.width / cam.height - width / height) > 1e-3:
+    if not _same_aspect(cam.width, cam.height, width, height):
         raise CalibrationError(
             f"{calib_name} is for {cam.width}x{cam.height} but {what} delivers {width}x{height} "
             "(another aspect ratio); calibrate at this size"
