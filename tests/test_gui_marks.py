@@ -72,10 +72,12 @@ def changed_at(a: np.ndarray, b: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 def set_marks(qtbot, window, on: bool) -> np.ndarray:
     """Toggle View > Show detected markers while paused; the view's picture once the engine has drawn the
-    paused frame again with the new setting."""
+    paused frame again with the new setting (a frame still on its way from before the pause or the toggle,
+    drawn with the old one, is not it: under load one came after the toggle and was taken for its redraw)."""
     before = window.session.last_shown
     window.marker_marks_action.setChecked(on)
-    qtbot.waitUntil(lambda: window.session.last_shown is not before, timeout=TIMEOUT_MS)
+    qtbot.waitUntil(lambda: window.session.last_shown is not before and window.session.last_shown.marks == on,
+                    timeout=TIMEOUT_MS)
     qtbot.wait(50)
     return grab_rgb(window.view)
 

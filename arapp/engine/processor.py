@@ -41,6 +41,7 @@ class Shown:
     dropped_capture: int = 0
     dropped_paint: int = 0
     qimage: Any = None
+    marks: bool = False  # drawn with the marker marks on (View > Show detected markers; outlines where there is a pose)
     # timing marks between captured_at and processed_at and after (perf_counter seconds, one clock for the
     # UI and the pipeline process on Linux): "start" (processing began), "composited" (tracked and drawn);
     # the GUI engines add "sent" and "received" (the child process's hand-over) and "taken" (by the UI)
@@ -235,15 +236,16 @@ class Processor(threading.Thread):
                         pass  # a stale selection (model changed meanwhile): draw nothing
                 composited = time.perf_counter()
                 display = self._display(shown_image)
-                if self.marks and result.world_from_camera is not None:
+                marks = self.marks  # read once: the UI may switch it meanwhile, and Shown says which was drawn
+                if marks and result.world_from_camera is not None:
                     try:
                         self._draw_marks(display, result, item.image)
                     except (ValueError, IndexError, AttributeError) as exc:  # the view goes on without them
                         self._report("Cannot draw the detected markers", exc)
-                        self.marks = False
+                        self.marks = marks = False
                 shown = Shown(result, display, item.image, item.captured_at, time.perf_counter(),
                               dropped_capture=self.inbox.dropped + self.skipped(),
-                              qimage=None if self.wrap is None else self.wrap(display),
+                              qimage=None if self.wrap is None else self.wrap(display), marks=marks,
                               stages={"start": started, "composited": composited})
                 self.out.put(shown)
                 if self.on_ready is not None:

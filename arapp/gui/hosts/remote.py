@@ -201,7 +201,7 @@ class _Child:
         meta = {"index": int(r.index), "t": float(r.t), "state": r.state, "markers": int(r.markers),
                 "inliers": int(r.inliers), "ms_track": float(r.ms_track), "ms_render": float(r.ms_render),
                 "pose": None if r.world_from_camera is None else np.asarray(r.world_from_camera).tolist(),
-                "captured_at": shown.captured_at, "processed_at": shown.processed_at,
+                "captured_at": shown.captured_at, "processed_at": shown.processed_at, "marks": shown.marks,
                 "dropped": shown.dropped_capture, "w": bgra.shape[1], "h": bgra.shape[0],
                 "full": self.full_frames, **{k: r.extra[k] for k in STATE_KEYS},
                 "ambiguous": bool(r.extra.get("ambiguous", False))}   # a head-on marker's tilt undecided
@@ -459,7 +459,7 @@ class RemoteEngine(EngineSignals):
         # here, taken by the UI thread (set in take)
         stages = {**meta.get("stages", {}), "received": received}
         shown = Shown(result, bgra, frame, meta["captured_at"], meta["processed_at"],
-                      dropped_capture=meta["dropped"], qimage=q, stages=stages)
+                      dropped_capture=meta["dropped"], qimage=q, marks=meta["marks"], stages=stages)
         shown.ring_slot = held
         self._release(self.shown.replace(shown))  # a frame nobody took is dropped: its slot is free again
         if notify:
