@@ -64,8 +64,9 @@ def source_info(source, name: str, default_anchors: list | None = None) -> Sourc
 
 def default_pipeline(source, info: SourceInfo) -> Pipeline:
     """The live view's pipeline: tracking and drawing, no status line (the app shows the state itself);
-    the model arrives later as a command."""
-    return Pipeline(info.camera, info.anchors, status_line=False)
+    the model arrives later as a command. The tracker leaves its keypoint upkeep for after each frame is
+    shown (`TrackerConfig.defer_upkeep`; the processing thread runs it: `Processor._idle`)."""
+    return Pipeline(info.camera, info.anchors, status_line=False, tracker_params={"defer_upkeep": True})
 
 
 def _are_default(anchors: list) -> bool:

@@ -186,6 +186,11 @@ class Pipeline:
                            float(res.ms), (t2 - t1) * 1e3, out,
                            extra={"ambiguous": True} if getattr(res, "ambiguous", False) else {})
 
+    def idle(self) -> bool:
+        """Between frames, once the last one is shown: the keypoint work its tracking left for later
+        (`TrackerConfig.defer_upkeep`; the next `process` does it otherwise). Whether there was any."""
+        return self.tracker.upkeep()
+
     def draw_overlay(self, image: np.ndarray, world_from_camera: np.ndarray | None,
                      depth: np.ndarray | None = None) -> np.ndarray:
         """A copy of the BGR `image` with the model (and toolpaths) drawn as seen from `world_from_camera`,

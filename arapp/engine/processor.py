@@ -177,6 +177,17 @@ class Processor(threading.Thread):
         marks = marker_marks(pipe.camera, pipe.anchors, result.world_from_camera, seen)
         draw_marks(display, marks, result.image, frame, under_opacity(getattr(pipe, "mode", "shaded")))
 
+    def _idle(self) -> None:
+        """The pipeline's work for after a frame is shown (`Pipeline.idle`: the tracker's deferred keypoint
+        work), done here before the next frame is taken, off that frame's latency."""
+        idle = getattr(self.pipeline, "idle", None)   # (pipelines stood in by tests have none)
+        if idle is None:
+            return
+        try:
+            idle()
+        except Exception as exc:  # noqa: BLE001 - as a frame's tracking error: reported, the view goes on
+            self._report("Tracking or rendering failed", exc)
+
     def _apply_commands(self) -> bool:
         changed = False
         while True:
@@ -250,6 +261,7 @@ class Processor(threading.Thread):
                 self.out.put(shown)
                 if self.on_ready is not None:
                     self.on_ready()
+                self._idle()
         finally:
             try:
                 self.pipeline.close()

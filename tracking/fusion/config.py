@@ -68,6 +68,16 @@ class TrackerConfig:
     anchors are not found); False: the joint marker + keypoint fit on every detection frame."""
     keypoint_every: int = 10
     """frames: keypoint work period while the anchors carry the pose."""
+    defer_upkeep: bool = False
+    """while the anchors carry the pose, a frame due for keypoint work (`keypoint_every`, or the checks of
+    anchors that may move in the room) returns the anchors' pose at once and leaves that work (ORB, the
+    joint fit that checks the room and grows the map) to `Tracker.upkeep()`, which a live view calls
+    once the frame is shown and `process` runs first otherwise: such a frame's latency is the anchors'
+    few milliseconds instead of 25-50. The shown pose is the anchors' either way (`PoseFits.with_anchors`);
+    the motion model then steps from it rather than from the joint fit (on the tuning recordings the poses
+    were the same bit for bit but for marker_occluded's, within 0.11 mm). Off by default: offline drivers
+    gain nothing by it (the work runs at the next frame's start), and a benchmark timing a peer between two
+    frames would count the ORB running on the worker meanwhile as the peer's; the live view turns it on."""
     smear_px: float = 10.0
     """pixels: under fast motion markers are smeared and their corners can be off by pixels. When the
     anchors may have moved this far since the last frame, one frame of flow is computed as well; if the

@@ -27,10 +27,13 @@ corners) returns after frames carried by the map or flow, the output fades onto 
 `precise_blend_frames`, fewer than other seams take. New keyframes go to the mapping thread (triangulation,
 culling, local bundle adjustment with anchor corners as constraints); `process` never waits for it. Offline
 drivers, which feed frames faster than a camera would, call `catch_up()` between frames so the map keeps the
-pace it would have live, whatever the machine's load.
+pace it would have live, whatever the machine's load. A live view defers the keypoint work of a frame the
+anchors carry (`TrackerConfig.defer_upkeep`): the frame returns the anchors' pose, and `upkeep()` does the
+rest once the frame is shown (else the next `process` does it first).
 
-Anchors that move in the room (a card held up to a webcam: `tracking.fusion.moving`): the map is dropped,
-and only flow on points of the anchors' plane carries unreadable frames, else they are lost. Anchor
+Anchors that move in the room (a card held up to a webcam: `tracking.fusion.moving`; those frames:
+`tracking.fusion.moving_frames`): the map is dropped, and only flow on points of the anchors' plane carries
+unreadable frames, else they are lost. Anchor
 measurements that must not move the model (a hand over a lone marker's margin, a look-alike pattern far from
 the prediction): `anchors.occlusion`, `TrackerConfig`; the map, else flow, carries the pose meanwhile.
 """
@@ -50,21 +53,21 @@ from tracking.fusion.handover import Handover, anchor_output, anchor_usable, pre
 from tracking.fusion.image import has_content, prepare
 from tracking.fusion.keyframes import Keyframes
 from tracking.fusion.moving import MovingAnchors
+from tracking.fusion.moving_frames import MovingAnchorFrames
 from tracking.fusion.output import Output
 from tracking.fusion.smear_gate import SmearGate
 from tracking.fusion.state import AnchorMemory, FrameState, TrackResult, TrackStatus
 from tracking.anchors.card import CardPoints
 from tracking.anchors.kinds import AnchorSpec
-from tracking.slam.anchor_motion import disagrees
 from tracking.slam.features import FeatureExtractor, Features
 from tracking.slam.flow import relift
-from tracking.slam.frame_pose import MotionModel, position_spread
+from tracking.slam.frame_pose import MotionModel
 from tracking.slam.map import Map
 from tracking.slam.map_io import adopt
 from tracking.slam.mapping import LocalMapper
 
 
-class Tracker:
+class Tracker(MovingAnchorFrames):
     """Anchors + keypoint SLAM. See the module docstring; settings: `TrackerConfig` (as `config`, or
     its field names as keyword arguments; `slam` may also be given positionally), read from `config`.
 
@@ -117,6 +120,7 @@ class Tracker:
         self.keyframes = Keyframes(cfg, self.map, self.mapper)
         self.room = MovingAnchors(self.camera, self.handover, self.fits.track_map, cfg.min_inliers)
         self.smear_gate = SmearGate(self.camera, cfg.smear_px, cfg.smear_skip)
+        self._pending = None   # the anchors' result of a frame whose keypoint work waits for `upkeep`
 
     def reset(self) -> None:
         """Forget the map and the motion; the next frame starts from the anchors."""
@@ -152,6 +156,7 @@ class Tracker:
 
     def export_map(self) -> Map:
         """The map as it stands once queued keyframes are mapped (to save in a scene file)."""
+        self.upkeep()
         self.wait_mapping()
         return self.map
 
@@ -181,6 +186,7 @@ class Tracker:
     # -- per frame ------------------------------------------------------------------
     def process(self, image: np.ndarray, t: float) -> TrackResult:
         """Track one frame (BGR or grey uint8, camera size) taken at time t seconds."""
+        self.upkeep()   # the last frame's deferred keypoint work, if a live view did not run it meanwhile
         t0 = time.perf_counter()
         bgr, gray = prepare(image, self.camera.size)
         self.frame = FrameState(self.frame.index + 1, t, t0, gray)
@@ -202,7 +208,7 @@ class Tracker:
         detect = st.since_detect + 1 >= cfg.marker_every or st.lost > 0 or young or self.motion.last is None
         ar = None
         if cfg.anchor_first and st.last_state == "marker" and st.lost == 0 and self.motion.last is not None:
-            res, ar = self._anchors_first()
+            res, ar = self._anchors_first(young)
             if res is not None:
                 return res
             if self.room.suspects(frame.index) and not (
@@ -223,7 +229,7 @@ class Tracker:
         st.full_frame = frame.index
         return self._full_frame(detect, ar, flow_tried, young)
 
-    def _anchors_first(self) -> tuple[TrackResult | None, object]:
+    def _anchors_first(self, young: bool) -> tuple[TrackResult | None, object]:
         """Anchors were measured last frame: the anchor tracker re-finds them at their predicted place (no
         detector pass, a few ms) and its pose is the most accurate there is. Keypoint work (ORB, matching,
         keyframes) runs only every `keypoint_every` frames to grow the map, or when the anchors are not found.
@@ -237,8 +243,9 @@ class Tracker:
         ar, _ = self._measure_anchors(self._follow_from_last)   # (the flow is kept for this frame)
         pose = anchor_output(ar) if anchor_usable(ar) else None
         # (every frame while a check that found the anchors moving in the room waits to be confirmed)
-        if (pose is None or frame.index - self.status.full_frame >= self.config.keypoint_every
-                or self.room.checks_often(frame.index) or not self.handover.plausible(pose, self.motion.last, t)):
+        due = frame.index - self.status.full_frame >= self.config.keypoint_every or self.room.checks_often(frame.index)
+        if pose is None or not self.handover.plausible(pose, self.motion.last, t) or (
+                due and (young or not self.config.defer_upkeep)):
             return None, ar
         jumped = self.handover.jumped(ar, t)
         got = self._follow_from_last() if self.handover.moving_fast(ar, t) or jumped else None
@@ -248,6 +255,10 @@ class Tracker:
         # the flow's points, now measured in this image, are followed on from here (their plane seeds
         # placed from the anchors' pose, as new seeds would be); without flow it restarts next time
         self.flow.tracks = None if got is None else relift(self.camera, got[1], pose)
+        if due:   # the full frame's keypoint work, once the frame is shown (`upkeep`); its ORB starts now, on
+            # the worker (OpenCV releases the interpreter), beside the drawing of this frame
+            self.status.full_frame = frame.index
+            self._pending = (ar, self._pool.submit(self.extractor.extract, frame.gray))
         return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, int(ar.markers),
                             int(ar.inliers), precise=precise(ar)), ar
 
@@ -344,11 +355,20 @@ class Tracker:
             fit = self.fits.from_map(feats, pred, arrays, frame.t)
         if fit is None:
             return self._without_fit(ar, pred, markers)
+        if self._grow_map(ar, feats, fit, corners_w, corners_uv):
+            return self._finish(fit.pose, pred, fit.state, fit.source, fit.out_pose, markers, fit.inliers,
+                                precise=fit.precise)
+        # the anchors were seen to move on this very frame: their pose is shown, the map is gone
+        return self._finish(fit.pose if fit.out_pose is None else fit.out_pose, pred, "marker", "anchors", None,
+                            markers, fit.inliers, precise=precise(ar))
+
+    def _grow_map(self, ar, feats, fit: Fit, corners_w, corners_uv) -> bool:
+        """The full frame's map work after its fit: matches counted, a keyframe considered, the flow's tracks
+        started on its keypoints; False (none of it) once the anchors were seen to move in the room."""
+        frame = self.frame
         if self.room.moving:
-            # the anchors were seen to move on this very frame: their pose is shown, the map is gone
             self.flow.tracks = None
-            return self._finish(fit.pose if fit.out_pose is None else fit.out_pose, pred, "marker", "anchors", None,
-                                markers, fit.inliers, precise=precise(ar))
+            return False
         self.map.count_matches(fit.visible, fit.point_ids)
         if ar is None or not ar.ambiguous:
             # (not while a lone head-on marker's tilt is undecided: the map's points would be triangulated
@@ -357,8 +377,22 @@ class Tracker:
             self.keyframes.consider(frame.index, frame.t, fit.pose, feats, fit.point_ids, fit.feature_idx,
                                     corners_w, corners_uv, fit.state, fit.points, fit.inliers)
         self.flow.start_tracks(frame.gray, feats, fit)
-        return self._finish(fit.pose, pred, fit.state, fit.source, fit.out_pose, markers, fit.inliers,
-                            precise=fit.precise)
+        return True
+
+    def upkeep(self) -> bool:
+        """The keypoint work a frame left for later (`TrackerConfig.defer_upkeep`): its features, the joint fit
+        with the anchors (which checks the room and gives the keyframe's pose) and the map's growth, as its
+        full frame would have done them; the frame's result stands. Returns whether there was any."""
+        pending, self._pending = self._pending, None
+        if pending is None:
+            return False
+        ar, feats = pending[0], pending[1].result()
+        corners_w, corners_uv, _ = anchor_points(ar, self.camera)
+        fit = self._fit_on_anchors(ar, corners_w, corners_uv, feats, self.motion.predict(self.frame.t),
+                                   self.map.arrays(), False)
+        if fit is not None:
+            self._grow_map(ar, feats, fit, corners_w, corners_uv)
+        return True
 
     def _fit_on_anchors(self, ar, corners_w, corners_uv, feats, pred, arrays, young: bool) -> Fit:
         """The joint fit of the anchors' corners and the map, from the anchors' raw pose, or from the motion
@@ -408,76 +442,6 @@ class Tracker:
             pose = np.asarray(ar.world_from_camera, float)
             return self._finish(pose, pred, "marker", "anchors", None, n, len(cw))
         return self._lost_frame(markers)
-
-    def _unread_while_suspect(self, markers: int) -> TrackResult:
-        """The anchors are not read while a check that found them moving in the room waits to be confirmed
-        (`MovingAnchors.suspects`): the room's points must not carry a card that may be swinging. One frame of
-        flow on points of the anchors (as once they move) and one on the room's (map points, plane seeds) from
-        the last frame: the room's carries when the two agree (`anchor_motion.disagrees` at 1 px: the card
-        stood still in the room, the check was a one-off), else the anchors'; without the anchors' the frame
-        is lost."""
-        frame, K = self.frame, self.camera.K
-        frame.flow_ran = False   # (one of the flows may have run beside the anchors already)
-        card = self._follow_on_anchors()
-        frame.flow_ran = False
-        room = self._follow_from_last()
-        if card is None:
-            if self.status.lost == 0:
-                self.anchor_tracker.reset()   # (as once they move: a filter carried over would lag the card)
-            return self._lost_frame(markers)
-        got = card
-        if room is not None and not disagrees(card[0], room[0], position_spread(K, card[0], card[1].X, 1.0),
-                                              position_spread(K, room[0], room[1].X, 1.0)):
-            got = room
-        frame.followed = got
-        return self._flow_result(got, markers)
-
-    def _moving_anchor_frame(self) -> TrackResult:
-        """A frame once the anchors move in the room (`anchors_moving`): the anchors' pose when they are measured
-        (with the start and smear checks of the still case), else optical flow on points of the anchors
-        themselves (`FlowFollower.follow_on_anchors`), else lost: nothing of the room carries the pose."""
-        t = self.frame.t
-        ar, got = self._measure_anchors(self._follow_on_anchors)
-        markers = int(ar.markers)
-        if anchor_usable(ar):
-            pose = anchor_output(ar)
-            usable, got = self._moving_anchors_hold(ar, pose, got)
-            if usable:
-                self.flow.tracks = None if got is None else relift(self.camera, got[1], pose)
-                return self._finish(pose, self.motion.predict(t), "marker", "anchors", None, markers,
-                                    int(ar.inliers), precise=precise(ar))
-        if not self.room.moving:
-            return self._unread_while_suspect(markers)
-        if got is None:
-            got = self._follow_on_anchors()
-        if got is not None:
-            return self._flow_result(got, markers)
-        if self.status.lost == 0:
-            # the card moves unseen (a swing): the anchors' filter state and tracked corners are stale, and a
-            # filter that carried them over would lag the card's new place by centimetres when it is read again
-            self.anchor_tracker.reset()
-        return self._lost_frame(markers)
-
-    def _moving_anchors_hold(self, ar, pose, got) -> tuple[bool, tuple | None]:
-        """(whether the moving anchors' usable pose `pose` carries this frame, the flow on the anchors when it
-        ran): not when they cannot start the pose, are implausible, or the flow on them holds better."""
-        h, frame, t = self.handover, self.frame, self.frame.t
-        if self.status.lost > 0 or self.motion.last is None:
-            if h.board_fit(ar) is None:
-                # a lone marker or QR code after a swing: nothing else can carry the card, and its smeared
-                # reading is what plain detection shows (the sharpness rule waits for a camera's next,
-                # sharper frames; a card keeps swinging); a board's smeared start reads centimetres off
-                return True, got
-            return not h.cannot_start(ar, frame), got
-        if not h.plausible(pose, self.motion.last, t) or h.start_uncertain(ar, frame):
-            # a board smeared at a swing's start reads centimetres off: the points on it, else lost
-            return False, got
-        if got is None and h.moving_fast(ar, t):
-            got = self._follow_on_anchors()
-        if got is not None and (h.smeared(ar, got, frame.gray, t, self.anchor) or h.partial_view(ar)
-                                or h.flow_holds_better(ar, got, t, self.anchor)):
-            return False, got   # the points on the anchors, followed from the last frame, hold better
-        return True, got
 
     # -- pieces ---------------------------------------------------------------------
     def _measure_anchors(self, follow) -> tuple[object, tuple | None]:
