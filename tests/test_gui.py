@@ -402,6 +402,22 @@ def test_drag_and_drop_opens_models_and_recordings(qtbot, window, recording):
                     timeout=TIMEOUT_MS)
 
 
+def test_no_control_point_is_ringed_until_one_is_picked(qtbot, window):
+    """A model just opened shows its first control point in the fields, but rings none in the view (the
+    panel used to announce that first point as picked, and every frame was drawn with a ring on it)."""
+    window.open_model(str(MODELS / "rational_5x5.json"))
+    wait_model(qtbot, window, "rational_5x5.json")
+    panel = window.model_panel
+    assert panel.selected() == (0, 0, 0) and window.session.highlight is None
+    panel.u_index.setValue(2)
+    assert window.session.highlight == (0, 2, 0)
+    panel.u_index.setValue(0)   # back to the first point: picked now, so ringed
+    assert window.session.highlight == (0, 0, 0)
+    window.open_model(str(MODELS / "vase.json"))   # another model: nothing picked on it yet
+    wait_model(qtbot, window, "vase.json")
+    assert window.session.highlight is None
+
+
 def test_selected_control_point_is_ringed_in_the_view(qtbot, window, recording):
     from arapp.geometry.placement import world_from_model
     from tracking.poses import invert

@@ -145,7 +145,7 @@ def _meta(i: int, slot: int) -> dict:
     from arapp.gui.hosts.remote import STATE_KEYS
 
     return {"index": i, "t": i / 30.0, "state": "lost", "markers": 0, "inliers": 0, "ms_track": 1.0,
-            "ms_render": 1.0, "pose": None, "captured_at": 0.0, "processed_at": 0.0, "dropped": 0,
+            "ms_render": 1.0, "pose": None, "captured_at": 0.0, "processed_at": 0.0, "marks": False, "dropped": 0,
             "w": SHAPE[1], "h": SHAPE[0], "full": False, "slot": slot, **{k: None for k in STATE_KEYS}}
 
 

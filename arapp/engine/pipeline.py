@@ -79,6 +79,9 @@ class Pipeline:
         self.color = None
         self.world_from_model = np.eye(4)
         self.toolpaths = None  # (line_sets, world_from_bed) set by set_toolpaths
+        # what the last draw_overlay composited onto its frame, in order: [(premultiplied RGBA crop, x0, y0)]
+        # (frame pixels; the live view composites them again onto its picture scaled to the window)
+        self.overlay: list = []
         self.occlusion: str | None = None  # "off", "depth", "plane"; None: depth when a frame has depth
         self._plane = None  # arapp.render.occlusion.PlaneDepth, made on first use
         self.set_occlusion(occlusion)
@@ -200,6 +203,7 @@ class Pipeline:
         with new settings through it, and the tracker never sees a frame twice.
         """
         out = image.copy()
+        self.overlay = []
         if world_from_camera is None:
             return out
         camera_from_world = invert(world_from_camera)
@@ -208,11 +212,17 @@ class Pipeline:
             out = self.renderer.draw(out, self.mesh, camera_from_world @ self.world_from_model, mode=self.mode,
                                      lines=self.lines if self.mode == "isolines" else None, color=self.color,
                                      inplace=True, occlusion=occ)
+            self._note_overlay()
         if self.toolpaths is not None:
             line_sets, world_from_bed = self.toolpaths
             out = self.renderer.draw(out, None, camera_from_world @ world_from_bed, line_sets=line_sets,
                                      inplace=True, occlusion=occ)
+            self._note_overlay()
         return out
+
+    def _note_overlay(self) -> None:
+        if self.renderer.last_crop is not None:
+            self.overlay.append(self.renderer.last_crop)
 
     def close(self) -> None:
         self.tracker.close()

@@ -15,6 +15,7 @@ import sys
 import threading
 import time
 import traceback
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
@@ -22,6 +23,7 @@ import cv2
 import numpy as np
 
 from arapp.engine.overlay_marks import draw_marks, marker_marks, under_opacity
+from arapp.render import composite
 from arapp.engine.player import Captured
 from arapp.engine.slots import LatestSlot
 from tracking.poses import invert
@@ -170,12 +172,21 @@ class Processor(threading.Thread):
         self._halt.set()
         self.inbox.wake()
 
-    def _draw_marks(self, display: np.ndarray, result, frame: np.ndarray) -> None:
-        """The detected markers outlined in the display picture, under the model (arapp.engine.overlay_marks)."""
+    def _draw_marks(self, display: np.ndarray, result, frame: np.ndarray | None) -> bool:
+        """The detected markers outlined in the display picture (arapp.engine.overlay_marks), under the model
+        where it differs from `frame` (None: the model is laid over them afterwards). False when they could not
+        be drawn: reported, and off from then on."""
         seen = result.markers if getattr(result, "state", None) == "marker" else 0
         pipe = self.pipeline
-        marks = marker_marks(pipe.camera, pipe.anchors, result.world_from_camera, seen)
-        draw_marks(display, marks, result.image, frame, under_opacity(getattr(pipe, "mode", "shaded")))
+        try:
+            marks = marker_marks(pipe.camera, pipe.anchors, result.world_from_camera, seen)
+            draw_marks(display, marks, None if frame is None else result.image, frame,
+                       under_opacity(getattr(pipe, "mode", "shaded")))
+        except (ValueError, IndexError, AttributeError) as exc:  # the view goes on without them
+            self._report("Cannot draw the detected markers", exc)
+            self.marks = False
+            return False
+        return True
 
     def _idle(self) -> None:
         """The pipeline's work for after a frame is shown (`Pipeline.idle`: the tracker's deferred keypoint
@@ -213,61 +224,97 @@ class Processor(threading.Thread):
         except Exception as exc:  # noqa: BLE001
             self._report("Cannot start tracking and rendering", exc)
             return
+        # scales each new frame for the view while this thread tracks and draws it (OpenCV releases the
+        # interpreter): the picture's largest cost off the frame's latency
+        self._side = ThreadPoolExecutor(max_workers=1, thread_name_prefix="arapp-scale")
         try:
             while not self._halt.is_set():
                 item = self.inbox.take(timeout=0.5)
                 changed = self._apply_commands()
                 if self._halt.is_set():
                     break
-                started = time.perf_counter()
-                try:
-                    if item is None:
-                        if not changed or self._last is None:
-                            continue
-                        # Paused: draw the last frame again with the new settings, without tracking it twice.
-                        item, last_result = self._last
-                        result = redraw(self.pipeline, item, last_result)
-                    else:
-                        # depth only when the frame has it: pipelines stood in by tests take no depth
-                        extra = {} if item.depth is None else {"depth": item.depth}
-                        result = self.pipeline.process(item.image, item.t, item.index, **extra)
-                        if self.watch is not None:
-                            self.watch(item.image, result.world_from_camera)
-                except Exception as exc:  # noqa: BLE001 - one bad frame must not end the view
-                    self._report("Tracking or rendering failed", exc)
+                shown = self._show(item, changed)
+                if shown is None:
                     continue
-                self._last = (item, result)
-                self.processed += 1
-                shown_image = result.image
-                if self.highlight is not None:
-                    try:
-                        shown_image = mark_control_point(shown_image, self.pipeline, result.world_from_camera,
-                                                         *self.highlight)
-                    except (IndexError, ValueError, AttributeError):
-                        pass  # a stale selection (model changed meanwhile): draw nothing
-                composited = time.perf_counter()
-                display = self._display(shown_image)
-                marks = self.marks  # read once: the UI may switch it meanwhile, and Shown says which was drawn
-                if marks and result.world_from_camera is not None:
-                    try:
-                        self._draw_marks(display, result, item.image)
-                    except (ValueError, IndexError, AttributeError) as exc:  # the view goes on without them
-                        self._report("Cannot draw the detected markers", exc)
-                        self.marks = marks = False
-                shown = Shown(result, display, item.image, item.captured_at, time.perf_counter(),
-                              dropped_capture=self.inbox.dropped + self.skipped(),
-                              qimage=None if self.wrap is None else self.wrap(display), marks=marks,
-                              stages={"start": started, "composited": composited})
                 self.out.put(shown)
                 if self.on_ready is not None:
                     self.on_ready()
                 self._idle()
         finally:
+            self._side.shutdown(wait=True)
             try:
                 self.pipeline.close()
             except Exception:  # noqa: BLE001 - shutting down; a GL teardown error changes nothing
                 pass
 
+    def _show(self, item: Captured | None, changed: bool) -> Shown | None:
+        """The newest frame tracked and drawn into a `Shown` (paused, None: the last frame drawn again when a
+        setting `changed`); None when there is nothing to show or the frame failed (reported)."""
+        started = time.perf_counter()
+        ahead = None
+        try:
+            if item is None:
+                if not changed or self._last is None:
+                    return None
+                # Paused: draw the last frame again with the new settings, without tracking it twice.
+                item, last_result = self._last
+                result = redraw(self.pipeline, item, last_result)
+            else:
+                ahead = self._scale_ahead(item.image)
+                # depth only when the frame has it: pipelines stood in by tests take no depth
+                extra = {} if item.depth is None else {"depth": item.depth}
+                result = self.pipeline.process(item.image, item.t, item.index, **extra)
+                if self.watch is not None:
+                    self.watch(item.image, result.world_from_camera)
+        except Exception as exc:  # noqa: BLE001 - one bad frame must not end the view
+            self._report("Tracking or rendering failed", exc)
+            return None
+        self._last = (item, result)
+        self.processed += 1
+        composited = time.perf_counter()
+        display, marks = self._picture(result, item, ahead)
+        return Shown(result, display, item.image, item.captured_at, time.perf_counter(),
+                     dropped_capture=self.inbox.dropped + self.skipped(),
+                     qimage=None if self.wrap is None else self.wrap(display), marks=marks,
+                     stages={"start": started, "composited": composited})
+
+    def _scale_ahead(self, frame: np.ndarray):
+        """A future of `frame` as captured made into the display picture (`_display`) on the side thread, when
+        the pipeline's overlay can be laid on it afterwards (`_picture`); else None."""
+        pipe, size = self.pipeline, self.display_size
+        if (sys.byteorder != "little" or self.highlight is not None or getattr(pipe, "overlay", None) is None
+                or not getattr(pipe, "draw", False) or getattr(pipe, "status_line", True)):
+            return None
+        if size is not None and min(size[0] / frame.shape[1], size[1] / frame.shape[0]) < 0.5:
+            return None   # (below half size the picture averages areas: composite.over_scaled does not)
+        return self._side.submit(self._display, frame)
+
+    def _picture(self, result, item: Captured, ahead) -> tuple[np.ndarray, bool]:
+        """(The display picture of `result`, whether the marker marks were on for it). From the frame scaled
+        `ahead`: the marks drawn on it, then the pipeline's overlay laid over them (`composite.over_scaled`).
+        Else the composite scaled, the marks drawn under the model where it differs from the frame."""
+        marks = self.marks  # read once: the UI may switch it meanwhile, and Shown says which was drawn
+        draw = marks and result.world_from_camera is not None
+        if ahead is not None:
+            display = ahead.result()
+            if self.highlight is None:   # (set meanwhile: the composite's picture rings the point)
+                frame = item.image
+                if draw:
+                    draw = self._draw_marks(display, result, None)
+                scale = (display.shape[1] / frame.shape[1], display.shape[0] / frame.shape[0])
+                for crop, x0, y0 in self.pipeline.overlay:
+                    composite.over_scaled(display, crop, x0, y0, scale)
+                return display, marks and draw is not False
+        shown_image = result.image
+        if self.highlight is not None:
+            try:
+                shown_image = mark_control_point(shown_image, self.pipeline, result.world_from_camera, *self.highlight)
+            except (IndexError, ValueError, AttributeError):
+                pass  # a stale selection (model changed meanwhile): draw nothing
+        display = self._display(shown_image)
+        if draw:
+            draw = self._draw_marks(display, result, item.image)
+        return display, marks and draw is not False
 
 
 class ProcessingStage:

@@ -33,6 +33,35 @@ def over_bgr(frame_bgr: np.ndarray, premul_rgba: np.ndarray, x0: int, y0: int) -
         roi[...] = cv2.add(fg, bg)
 
 
+def over_scaled(picture: np.ndarray, premul_rgba: np.ndarray, x0: int, y0: int, scale: tuple[float, float]) -> None:
+    """Composite a premultiplied RGBA crop of a frame, its top-left at frame pixel (x0, y0), in place over
+    `picture`: that frame scaled by `scale` (sx, sy) as cv2.resize scales (pixel centres: display x + 0.5 =
+    (frame x + 0.5) * sx), in the screen's 32-bit B, G, R, 255 order (arapp.engine.processor.to_bgra, on a
+    little-endian machine). The crop is resampled bilinearly onto the picture's pixels (transparent beyond its
+    edges) and laid over them as `over_bgr` does; the picture's fourth byte stays 255.
+
+    The same picture as scaling the frame with the crop composited on it, up to the resampling's rounding
+    (premultiplied colours interpolate linearly), for scales of 1/2 and up (below, cv2.resize averages areas)."""
+    sx, sy = scale
+    h, w = premul_rgba.shape[:2]
+    ph, pw = picture.shape[:2]
+    # the picture's pixels whose centres fall within the crop's pixel area, one more each side for the
+    # bilinear blend into transparency
+    bx0, by0 = max(int(np.floor((x0 - 1) * sx)), 0), max(int(np.floor((y0 - 1) * sy)), 0)
+    bx1, by1 = min(int(np.ceil((x0 + w + 1) * sx)), pw), min(int(np.ceil((y0 + h + 1) * sy)), ph)
+    if bx1 <= bx0 or by1 <= by0:
+        return
+    # picture pixel (u, v) of the box shows crop pixel ((u + bx0 + 0.5) / sx - 0.5 - x0, ...)
+    to_crop = np.array([[1.0 / sx, 0.0, (bx0 + 0.5) / sx - 0.5 - x0], [0.0, 1.0 / sy, (by0 + 0.5) / sy - 0.5 - y0]])
+    box = cv2.warpAffine(premul_rgba, to_crop, (bx1 - bx0, by1 - by0), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                         borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0, 0))
+    fg = cv2.cvtColor(box, cv2.COLOR_RGBA2BGRA)   # premultiplied: its alpha + the rest of 255 makes 255 again
+    inv = cv2.bitwise_not(box[..., 3])
+    roi = picture[by0:by1, bx0:bx1]   # a view: the kernels below write into the picture
+    bg = cv2.multiply(roi, cv2.merge((inv, inv, inv, inv)), scale=1.0 / 255.0)
+    cv2.add(fg, bg, dst=roi)
+
+
 def unpremultiply(premul_rgba: np.ndarray) -> np.ndarray:
     """Straight-alpha RGBA uint8 from premultiplied RGBA uint8 (colour undefined -> 0 where alpha is 0)."""
     a = premul_rgba[..., 3:4].astype(np.float32)

@@ -108,6 +108,9 @@ class OverlayRenderer:
                                               min(self.width, 8 * FBO_STEP), min(self.height, 8 * FBO_STEP))
         self._readback = None  # reused read-back buffer of the supersampled crop
         self._memo = None  # (key, last crop): see _render_crop
+        # what the last draw() composited: (premultiplied RGBA crop, x0, y0 in frame pixels), None for nothing
+        # (the live view composites the same crop again onto its picture scaled to the window)
+        self.last_crop = None
         self._read_depth, self._last_depth = False, None  # the model's depth, read once an occlusion asks
         self._lines_cache: OrderedDict[tuple, tuple] = OrderedDict()  # see _collect_lines
         self._gpu = GpuCache(GL)
@@ -169,11 +172,13 @@ class OverlayRenderer:
         if occlusion is not None and not self._read_depth:
             self._read_depth, self._memo = True, None  # from now on every render reads its depth back
         res = self._render_crop(mesh, camera_from_model, mode, lines, color, line_sets, shadow)
+        self.last_crop = None
         if res is not None:
             crop, x0, y0 = res
             if occlusion is not None and self._last_depth is not None:
                 crop = occlusion(crop, x0, y0, self._last_depth[0])
             composite.over_bgr(out, crop, x0, y0)
+            self.last_crop = (crop, x0, y0)
         return out
 
     def draw_lines(self, frame_bgr: np.ndarray, line_sets, camera_from_model, inplace: bool = False) -> np.ndarray:

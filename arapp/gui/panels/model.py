@@ -220,12 +220,14 @@ class ModelPanel(QWidget):
         self.surface_index.setRange(0, max(0, len(surfaces) - 1))
         self.surface_index.setValue(0)
         self._quiet = False
-        self._selection_changed()
+        # the fields show the first point, but none is ringed in the view until the user picks one (a ring
+        # on a corner of every new model was drawn, and paid for, on every frame)
+        self._show_selection(picked=False)
 
     def set_surfaces(self, surfaces: list) -> None:
         """The edited surfaces (same shapes), so the fields show the values in force."""
         self._surfaces = list(surfaces)
-        self._selection_changed()  # undo / redo: the fields show the restored point
+        self._show_selection(picked=False)  # undo / redo: the fields show the restored point
 
     def set_placement(self, p: Placement) -> None:
         """Show a placement (size_mm, offset mm, rotation_deg: the turn about z is edited here)."""
@@ -249,6 +251,11 @@ class ModelPanel(QWidget):
         return self.surface_index.value(), self.u_index.value(), self.v_index.value()
 
     def _selection_changed(self) -> None:
+        """The user picked a control point (a surface / u / v field changed): the fields show it, the view rings it."""
+        self._show_selection(picked=True)
+
+    def _show_selection(self, picked: bool) -> None:
+        """The fields show the selected control point; `picked` (the user chose it): the view rings it."""
         if self._quiet or not self._surfaces:
             return
         k = min(self.surface_index.value(), len(self._surfaces) - 1)
@@ -262,7 +269,8 @@ class ModelPanel(QWidget):
         for box, v in zip(self.position, s.control_points[i, j]):
             box.setValue(float(v))
         self._quiet = False
-        self.point_selected.emit(k, i, j)
+        if picked:
+            self.point_selected.emit(k, i, j)
 
     def _point_edited(self) -> None:
         if self._quiet or not self._surfaces:
