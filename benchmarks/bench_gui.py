@@ -28,11 +28,13 @@ MODEL = ROOT / "models" / "vase.json"
 
 
 # What a change did, measured on this machine in runs before and after it (a later run measures only its own day's code)
-HISTORY = ("Changes of 2026-12-08: the display stage went from 2.7-2.8 ms to 1.0-1.1 ms (median) with the frame "
-           "scaled ahead on the side thread and the model laid on afterwards, and with the first control point of a "
-           "newly opened model no longer ringed in the view until the user picks one (it was, by mistake, on every "
+HISTORY = ("Changes of 2026-12-08: with the frame scaled ahead on the side thread and the model laid on afterwards "
+           "the display stage went from 2.6-2.7 ms to 1.1 ms (median), but on these 2 cores the scaling competes with "
+           "the tracking, whose stage rose from 6.5-6.7 to 8.0-8.2 ms, so the median latency moved only 15.6-15.7 -> "
+           "15.1-15.4 ms (three paired runs of the threads variant, 8 s each); the first control point of a newly "
+           "opened model is no longer ringed in the view until the user picks one (it was, by mistake, on every "
            "frame: a copy of the full composite and the ring drawn on it); the shipped p95 went from 51-75 ms to "
-           "36-48 ms with the keypoint work deferred, the medians from 17-18 to 15-16 ms (the peer's 11-14).")
+           "36-48 ms with the keypoint work deferred (in-frame variant: 52-60 ms in the same runs).")
 
 
 def find_recording(width: int = 1280, height: int = 720) -> Path | None:
