@@ -3,10 +3,11 @@ over it (drag, wheel) as positions within the frame; what a drag means is the ma
 
 from __future__ import annotations
 
+import math
 import time
 
-from PySide6.QtCore import QPointF, QRectF, Qt, Signal
-from PySide6.QtGui import QColor, QImage, QPainter
+from PySide6.QtCore import QPoint, QPointF, QRect, QRectF, Qt, Signal
+from PySide6.QtGui import QColor, QImage, QPainter, QRegion
 from PySide6.QtWidgets import QSizePolicy, QWidget
 
 
@@ -109,13 +110,19 @@ class VideoView(QWidget):
 
     def paintEvent(self, event):  # noqa: N802 - Qt's name
         p = QPainter(self)
-        p.fillRect(self.rect(), QColor(24, 24, 28))
         if self._image is None:
+            p.fillRect(self.rect(), QColor(24, 24, 28))
             p.setPen(QColor(180, 180, 190))
             p.drawText(self.rect(), Qt.AlignmentFlag.AlignCenter | Qt.TextFlag.TextWordWrap, self.message)
             p.end()
             return
         rect = self.image_rect()
+        # the bars beside the picture only: filling the whole view under it wrote every pixel twice a frame
+        inner = QRect(QPoint(math.ceil(rect.left()), math.ceil(rect.top())),
+                      QPoint(math.floor(rect.right()) - 1, math.floor(rect.bottom()) - 1))   # pixels it covers whole
+        p.setClipRegion(QRegion(self.rect()).subtracted(QRegion(inner)))
+        p.fillRect(self.rect(), QColor(24, 24, 28))
+        p.setClipping(False)
         ratio = self.devicePixelRatioF()
         if abs(rect.width() * ratio - self._image.width()) > 1.5:
             # only while the window is being resized: the workers scale frames to the view's size
