@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -71,16 +70,10 @@ def test_deferred_keypoint_work_leaves_every_pose_as_it_was():
 
 
 def test_the_processing_thread_runs_the_idle_work_after_the_frame_is_out():
+    from arapp.engine.pipeline import FrameResult
     from arapp.engine.player import Captured
     from arapp.engine.processor import Processor
     from arapp.engine.slots import LatestSlot
-
-    @dataclass
-    class Result:
-        index: int
-        t: float
-        image: np.ndarray
-        world_from_camera: object = None
 
     inbox, out = LatestSlot(), LatestSlot()
 
@@ -92,7 +85,7 @@ def test_the_processing_thread_runs_the_idle_work_after_the_frame_is_out():
 
         def process(self, image, t, index):
             self.calls.append(("process", index))
-            return Result(index, t, image)
+            return FrameResult(index, t, None, "lost", 0, 0, 0.0, 0.0, image)
 
         def idle(self):
             shown = out.take(timeout=0.0)   # the frame is already there for the view to take

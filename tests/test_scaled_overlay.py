@@ -5,7 +5,6 @@ the composite (the oracle: the crop composited at full size with over_bgr, then 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -51,6 +50,7 @@ def test_the_overlay_laid_on_the_scaled_frame_is_the_scaled_composite(scale, at)
 
 
 def test_the_processor_scales_the_frame_ahead_and_lays_the_overlay_on_it():
+    from arapp.engine.pipeline import FrameResult
     from arapp.engine.player import Captured
     from arapp.engine.processor import Processor
     from arapp.engine.slots import LatestSlot
@@ -58,13 +58,6 @@ def test_the_processor_scales_the_frame_ahead_and_lays_the_overlay_on_it():
     frame, crop = _scene()
     composite = frame.copy()
     over_bgr(composite, crop, 200, 100)
-
-    @dataclass
-    class Result:
-        index: int
-        t: float
-        image: np.ndarray
-        world_from_camera: object = None
 
     class Pipeline:
         draw, status_line = True, False
@@ -74,7 +67,7 @@ def test_the_processor_scales_the_frame_ahead_and_lays_the_overlay_on_it():
 
         def process(self, image, t, index):
             self.overlay = [(crop, 200, 100)]
-            return Result(index, t, composite)
+            return FrameResult(index, t, None, "lost", 0, 0, 0.0, 0.0, composite)
 
         def close(self):
             pass
