@@ -2,10 +2,14 @@
 
 `Processor` owns the `arapp.engine.pipeline.Pipeline` (its tracker state and its GL
 context belong to the thread that made them), applies configuration commands
-between frames, processes the newest frame only, scales the composite to the
-view's size and converts it to the screen's 32-bit layout (B, G, R, 255 bytes),
-so the UI thread only copies it. `ProcessingStage` holds the processor of an
-engine, which exists only once the source is open.
+between frames, processes the newest frame only and makes the picture to paint:
+the frame scaled to the view's size in the screen's 32-bit layout (B, G, R, 255
+bytes), so the UI thread only copies it. A side thread scales the frame as
+captured while this one tracks and draws it; the marker marks and then the
+model's rendered crop are laid on it (`_picture`). Once the picture is out, the
+pipeline's deferred work runs (`Pipeline.idle`) before the next frame is taken.
+`ProcessingStage` holds the processor of an engine, which exists only once the
+source is open.
 """
 
 from __future__ import annotations
@@ -23,9 +27,9 @@ import cv2
 import numpy as np
 
 from arapp.engine.overlay_marks import draw_marks, marker_marks, under_opacity
-from arapp.render import composite
 from arapp.engine.player import Captured
 from arapp.engine.slots import LatestSlot
+from arapp.render import composite
 from tracking.poses import invert
 
 
@@ -300,11 +304,11 @@ class Processor(threading.Thread):
             if self.highlight is None:   # (set meanwhile: the composite's picture rings the point)
                 frame = item.image
                 if draw:
-                    draw = self._draw_marks(display, result, None)
+                    marks = self._draw_marks(display, result, None)
                 scale = (display.shape[1] / frame.shape[1], display.shape[0] / frame.shape[0])
                 for crop, x0, y0 in self.pipeline.overlay:
                     composite.over_scaled(display, crop, x0, y0, scale)
-                return display, marks and draw is not False
+                return display, marks
         shown_image = result.image
         if self.highlight is not None:
             try:
@@ -313,8 +317,8 @@ class Processor(threading.Thread):
                 pass  # a stale selection (model changed meanwhile): draw nothing
         display = self._display(shown_image)
         if draw:
-            draw = self._draw_marks(display, result, item.image)
-        return display, marks and draw is not False
+            marks = self._draw_marks(display, result, item.image)
+        return display, marks
 
 
 class ProcessingStage:
