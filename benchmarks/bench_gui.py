@@ -129,17 +129,12 @@ def _engine_without_deferral(window):
     return make
 
 
-def gui_run(recording: Path, seconds: float, speed: float = 1.0, engine: str = "process", defer: bool = True) -> dict:
-    """Replay in the real window for `seconds` after the first painted frames; return the measurements.
-    engine: "process" (the default: pipeline in a child process) or "threads" (worker threads here); defer:
-    False runs the tracker's keypoint work inside each frame (threads only: `_engine_without_deferral`)."""
+def _window(engine: str, defer: bool, speed: float):
+    """The app's main window on a fresh settings file, shown at 1600x1000, looping at `speed` (gui_run's)."""
     from PySide6.QtCore import QSettings
 
-    from arapp.gui.app import get_app
     from arapp.gui.main_window import MainWindow
-    from arapp.gui.probe import BlockProbe
 
-    app = get_app()
     tmp = tempfile.mkdtemp(prefix="arapp-bench-")
     w = MainWindow(settings=QSettings(str(Path(tmp) / "s.ini"), QSettings.Format.IniFormat))
     w.engine_kind = engine
@@ -151,6 +146,18 @@ def gui_run(recording: Path, seconds: float, speed: float = 1.0, engine: str = "
     idx = w.replay.speed.findData(speed)
     if idx >= 0:
         w.replay.speed.setCurrentIndex(idx)
+    return w
+
+
+def gui_run(recording: Path, seconds: float, speed: float = 1.0, engine: str = "process", defer: bool = True) -> dict:
+    """Replay in the real window for `seconds` after the first painted frames; return the measurements.
+    engine: "process" (the default: pipeline in a child process) or "threads" (worker threads here); defer:
+    False runs the tracker's keypoint work inside each frame (threads only: `_engine_without_deferral`)."""
+    from arapp.gui.app import get_app
+    from arapp.gui.probe import BlockProbe
+
+    app = get_app()
+    w = _window(engine, defer, speed)
     w.open_model(str(MODEL))
     deadline = time.perf_counter() + 60
     while w.model is None and time.perf_counter() < deadline:
@@ -295,6 +302,56 @@ def naive_gui_run(recording: Path, seconds: float) -> dict:
             "stages": stage_medians(stages[1:])}
 
 
+def _intro(what: str, seconds: float) -> str:
+    """The paragraph over the table: what was replayed (`what`), for how long, and the variants."""
+    return (
+        f"Replay of {what} with tracking (SLAM on) and the `vase` model rendered, {seconds:g} s per variant in the "
+        "real main window (Qt offscreen) on this 2-core CPU machine, paced at the recording's own rate (1x). "
+        "Latency: frame read -> painted on screen. UI block: the worst lateness of a 5 ms QTimer on the UI thread. "
+        "Variants in the same run: the app as shipped (capture, tracking and rendering in a child process, "
+        "latest frame wins), the same with the pipeline in worker threads of the GUI process, the threads "
+        "variant with the tracker's keypoint work inside the frame (as before it moved after the frame is shown: "
+        "below), and the peer, a single-threaded GUI doing the same work on the UI thread from a timer. Ratio: "
+        "shipped / peer."
+    )
+
+
+def _closing(load: float, idle: dict, head: float, gui: dict, fps_rec: float, share: str) -> str:
+    """The paragraph under the table: the machine's state, the ceiling, and how the variants work."""
+    return (
+        f"Machine state: load average {load:.1f} on 2 cores when the run started (the machine is shared); "
+        f"the same probe in an idle Qt event loop in this process saw a longest block of "
+        f"{idle['max_block_ms']:.0f} ms (99th percentile {idle['p99_block_ms']:.0f} ms): that much is the "
+        "machine, not the app. "
+        f"Headless pipeline ceiling on the same recording: {head:.1f} fps (the GUI shows "
+        f"{share} of it; it cannot exceed the recording's {fps_rec:g} fps at 1x). "
+        f"Frames dropped by latest-frame-wins in the shipped variant: {gui['dropped']}; tracking state at "
+        f"the end: {gui['tracked']}. The peer processes every frame in turn, so it falls behind the "
+        "recording's clock but its tracker sees small motions; the app keeps to the clock and drops frames, so "
+        "its tracker sees larger jumps between the frames it gets (the tracking-time row), and the frame reader "
+        "runs in parallel: on this shared 2-core machine that costs throughput. The numbers vary by 2x or more "
+        "from run to run with the machine's load. Stage rows: each painted frame's latency is split into "
+        "stages that add up to it, and each row gives that stage's median (the medians need not add up to the "
+        "median latency). The app scales each frame as captured to the view (32-bit, straight into the shared "
+        "memory the UI reads) on a side thread while the frame is tracked and drawn, then its display stage draws "
+        "the marker marks (View > Show detected markers, on by default; the peer draws none) and lays the model's "
+        "rendered crop over them at the view's scale (arapp.render.composite.over_scaled: the scaled composite to "
+        "2 levels), and sends the slot's number on a pipe that wakes the UI thread (arapp.gui.hosts.frame_ring, "
+        "arapp.gui.hosts.remote); the scaling then shares the 2 cores with the tracking; the peer has no waiting and no hand-over, its display stage "
+        "wraps the composite as a QImage and its paint scales it (Qt, smooth). Keypoint work: while the anchors "
+        "carry the pose, every tenth frame (and every frame while a check of anchors that may move in the room "
+        "waits: most of this short orbit) extracts ORB features, checks the room and grows the map, 20-30 ms at "
+        "720p; the shipped variants return the anchors' pose first and do that work once the frame is shown, "
+        "before the next is taken (TrackerConfig.defer_upkeep, arapp.engine.processor.Processor._idle; the "
+        "ORB starts on the tracker's worker beside the drawing). The poses are those of the tracker without it: "
+        "bit for bit on 24 of the 25 tuning recordings (held cards included; mapping inline), within 0.11 mm on "
+        "marker_occluded, where the motion model now steps from the anchors' pose, not the joint fit's "
+        "(tests/test_deferred_upkeep.py). "
+        "Where the checks come on every frame, the work still has to be done before the next frame and shows "
+        "as waiting instead; the peer runs the tracker as its users would, without it. " + HISTORY
+    )
+
+
 def run(quick: bool = False) -> str:
     seconds = 4.0 if quick else 10.0
     recording = find_recording()
@@ -343,15 +400,8 @@ def run(quick: bool = False) -> str:
     lines = [
         "## GUI: live view replay (arapp gui)",
         "",
-        f"Replay of `{recording.name}` (1280x720, {fps_rec:g} fps, {session['anchors'][0]['kind']} anchor){note} "
-        f"with tracking (SLAM on) and the `vase` model rendered, {seconds:g} s per variant in the real main "
-        "window (Qt offscreen) on this 2-core CPU machine, paced at the recording's own rate (1x). Latency: "
-        "frame read -> painted on screen. UI block: the worst lateness of a 5 ms QTimer on the UI thread. "
-        "Variants in the same run: the app as shipped (capture, tracking and rendering in a child process, "
-        "latest frame wins), the same with the pipeline in worker threads of the GUI process, the threads "
-        "variant with the tracker's keypoint work inside the frame (as before it moved after the frame is shown: "
-        "below), and the peer, a single-threaded GUI doing the same work on the UI thread from a timer. Ratio: "
-        "shipped / peer.",
+        _intro(f"`{recording.name}` (1280x720, {fps_rec:g} fps, {session['anchors'][0]['kind']} anchor){note}",
+               seconds),
         "",
         "| measure | arapp gui (pipeline process) | arapp gui (pipeline threads) | pipeline threads, keypoint "
         "work in the frame | single-threaded GUI (peer) | ratio | goal |",
@@ -366,36 +416,7 @@ def run(quick: bool = False) -> str:
         row("tracking time per processed frame, mean", "track_ms", " ms"),
         *stage_rows(),
         "",
-        f"Machine state: load average {load:.1f} on 2 cores when the run started (the machine is shared); "
-        f"the same probe in an idle Qt event loop in this process saw a longest block of "
-        f"{idle['max_block_ms']:.0f} ms (99th percentile {idle['p99_block_ms']:.0f} ms): that much is the "
-        "machine, not the app. "
-        f"Headless pipeline ceiling on the same recording: {head:.1f} fps (the GUI shows "
-        f"{ratio(gui['fps'], head)} of it; it cannot exceed the recording's {fps_rec:g} fps at 1x). "
-        f"Frames dropped by latest-frame-wins in the shipped variant: {gui['dropped']}; tracking state at "
-        f"the end: {gui['tracked']}. The peer processes every frame in turn, so it falls behind the "
-        "recording's clock but its tracker sees small motions; the app keeps to the clock and drops frames, so "
-        "its tracker sees larger jumps between the frames it gets (the tracking-time row), and the frame reader "
-        "runs in parallel: on this shared 2-core machine that costs throughput. The numbers vary by 2x or more "
-        "from run to run with the machine's load. Stage rows: each painted frame's latency is split into "
-        "stages that add up to it, and each row gives that stage's median (the medians need not add up to the "
-        "median latency). The app scales each frame as captured to the view (32-bit, straight into the shared "
-        "memory the UI reads) on a side thread while the frame is tracked and drawn, then its display stage draws "
-        "the marker marks (View > Show detected markers, on by default; the peer draws none) and lays the model's "
-        "rendered crop over them at the view's scale (arapp.render.composite.over_scaled: the scaled composite to "
-        "2 levels), and sends the slot's number on a pipe that wakes the UI thread (arapp.gui.hosts.frame_ring, "
-        "arapp.gui.hosts.remote); the scaling then shares the 2 cores with the tracking; the peer has no waiting and no hand-over, its display stage "
-        "wraps the composite as a QImage and its paint scales it (Qt, smooth). Keypoint work: while the anchors "
-        "carry the pose, every tenth frame (and every frame while a check of anchors that may move in the room "
-        "waits: most of this short orbit) extracts ORB features, checks the room and grows the map, 20-30 ms at "
-        "720p; the shipped variants return the anchors' pose first and do that work once the frame is shown, "
-        "before the next is taken (TrackerConfig.defer_upkeep, arapp.engine.processor.Processor._idle; the "
-        "ORB starts on the tracker's worker beside the drawing). The poses are those of the tracker without it: "
-        "bit for bit on 24 of the 25 tuning recordings (held cards included; mapping inline), within 0.11 mm on "
-        "marker_occluded, where the motion model now steps from the anchors' pose, not the joint fit's "
-        "(tests/test_deferred_upkeep.py). "
-        "Where the checks come on every frame, the work still has to be done before the next frame and shows "
-        "as waiting instead; the peer runs the tracker as its users would, without it. " + HISTORY,
+        _closing(load, idle, head, gui, fps_rec, ratio(gui['fps'], head)),
         "",
     ]
     return "\n".join(lines)

@@ -33,9 +33,9 @@ rest once the frame is shown (else the next `process` does it first).
 
 Anchors that move in the room (a card held up to a webcam: `tracking.fusion.moving`; those frames:
 `tracking.fusion.moving_frames`): the map is dropped, and only flow on points of the anchors' plane carries
-unreadable frames, else they are lost. Anchor
-measurements that must not move the model (a hand over a lone marker's margin, a look-alike pattern far from
-the prediction): `anchors.occlusion`, `TrackerConfig`; the map, else flow, carries the pose meanwhile.
+unreadable frames, else they are lost. Anchor measurements that must not move the model (a hand over a lone
+marker's margin, a look-alike pattern far from the prediction): `anchors.occlusion`, `TrackerConfig`; the
+map, else flow, carries the pose meanwhile.
 """
 
 from __future__ import annotations
