@@ -345,3 +345,46 @@ def test_marker_sheets_print_the_anchors_in_use(tmp_path):
         ids = detector.detectMarkers(cv2.imread(str(p)))[1]
         found.append(sorted(int(i) for i in (np.zeros(0) if ids is None else ids).ravel()))
     assert found == [list(range(12)), [20]]
+
+
+class SlowReadSource(ListSource):
+    """Each frame takes `read_s` to read (a decoder), its start time noted."""
+
+    def __init__(self, *a, read_s: float = 0.0, **k):
+        super().__init__(*a, **k)
+        self.read_s, self.read_at = read_s, []
+
+    def __next__(self):
+        self.read_at.append(time.perf_counter())
+        time.sleep(self.read_s)
+        return super().__next__()
+
+
+def test_a_recording_reads_its_next_frame_once_the_consumer_is_done_and_still_in_time():
+    """A 20 fps recording whose frames take 15 ms to read, a consumer busy 20 ms with each: the next frame is
+    read once the consumer waits for it (not beside its work, where the decoding shared the cores with the
+    tracking), and it is still handed over when due."""
+    from arapp.engine.player import Player
+
+    src = SlowReadSource(24, fps=20.0, read_s=0.015)
+    inbox = LatestSlot()
+    busy = []   # (took, done) of each frame the consumer worked on
+    player = Player(lambda: src, inbox)
+    player.start()
+    while len(busy) < 20:
+        item = inbox.take(timeout=2.0)
+        assert item is not None, "no frame within 2 s"
+        took = time.perf_counter()
+        time.sleep(0.020)
+        busy.append((took, time.perf_counter(), item))
+    player.stop()
+    player.join(2.0)
+    # the read of each next frame began after the consumer was done with the frame before it
+    after = [src.read_at[item.index + 1] >= done - 0.001 for _, done, item in busy[2:-1]]
+    assert np.mean(after) >= 0.7, after
+    # and the frames were handed over when due on the replay clock (read by then: waiting for the time itself
+    # would make them 15 ms late)
+    t0 = busy[0][2].captured_at - busy[0][2].t
+    late = [item.captured_at - (t0 + item.t) for _, _, item in busy]
+    assert np.median(late) < 0.005, late
+    assert [item.index for _, _, item in busy] == list(range(20))

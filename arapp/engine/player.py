@@ -19,10 +19,15 @@ import numpy as np
 from arapp.engine.slots import LatestSlot
 from arapp.engine.sourcespec import is_live, is_seekable
 
-# Recordings are read continuously at their pace (decoding in parallel with processing) rather than on
-# demand with seeks: OpenCV's seek in the recorder's MJPG/AVI files costs 50-150 ms here (it reopens and
-# decodes forward), against ~13 ms for the next frame at 1280x720. Measured by benchmarks/bench_gui.py.
+# Recordings are read continuously at their pace rather than on demand with seeks: OpenCV's seek in the
+# recorder's MJPG/AVI files costs 50-150 ms here (it reopens and decodes forward), against ~13 ms for the next
+# frame at 1280x720. Measured by benchmarks/bench_gui.py. Each next frame is read once the consumer is done
+# with the last one (it waits for a frame), or at the latest when it must be read to be ready when due
+# (`_read_by`): read at once, its decoding shared the cores with the last frame's tracking.
 ON_DEMAND = False
+# the margin kept for reading a frame in time: this many times the decoding's recent mean, plus READ_SLACK_S
+READ_MARGIN = 1.5
+READ_SLACK_S = 0.003
 
 
 @dataclass
@@ -56,8 +61,8 @@ class Player(threading.Thread):
         self.on_demand = on_demand
         self._demanded = False
         self.skipped = 0  # frames jumped over (never decoded) because the consumer was busy
-        if on_demand:
-            out.on_wait = self._demand
+        out.on_wait = self._demand   # (on demand: reads then; else reads no earlier, `_read_by`)
+        self._read_s = 0.0   # seconds reading (decoding) a frame takes, a running mean
         self.opener = opener
         self.out = out
         self.source = None
@@ -78,6 +83,7 @@ class Player(threading.Thread):
         self.live = False
         self.frames_read = 0
         self.last_index = -1
+        self.last_t: float | None = None   # stream time of the last frame handed over
 
     # -- commands (any thread) -------------------------------------------------------
     def _command(self, **changes) -> None:
@@ -131,6 +137,28 @@ class Player(threading.Thread):
             self._cond.wait_for(lambda: self._demanded or self._halt or not self._playing or self._seek is not None
                                 or self._ref is not ref)
             return self._demanded and not self._halt and self._playing and self._seek is None
+
+    def _read_by(self) -> None:
+        """Playing a recording continuously: wait until the consumer wants a frame, or until the next one must
+        be read to be ready when due (its decoding's recent time with a margin before), or a command."""
+        with self._cond:
+            if self._ref is None:
+                return   # a new clock: read now
+            wall0, t0 = self._ref
+            ref, speed = self._ref, self._speed
+        times = getattr(self.source, "times", None)
+        nxt = self.last_index + 1
+        if times is not None and nxt < len(times):
+            t_next = float(times[nxt])
+        else:
+            fps = float(getattr(self.source, "fps", 0.0) or 0.0)
+            if fps <= 0 or self.last_t is None:
+                return
+            t_next = self.last_t + 1.0 / fps
+        deadline = wall0 + (t_next - t0) / speed - READ_MARGIN * self._read_s - READ_SLACK_S
+        with self._cond:
+            self._cond.wait_for(lambda: self._demanded or self._halt or not self._playing or self._seek is not None
+                                or self._ref is not ref, max(0.0, deadline - time.perf_counter()))
 
     def _due_index(self, next_index: int) -> int:
         """The newest frame whose time has come on the replay clock (at least next_index)."""
@@ -239,13 +267,17 @@ class Player(threading.Thread):
                     continue
                 ahead = self._skip_to_due()
                 it = it if ahead is None else ahead
+            elif self._playing and not is_step and not self.live and first is None:
+                self._read_by()
             try:
                 with self._cond:
                     self._demanded = False
                 if first is not None:
                     frame, first = first, None
                 else:
+                    started = time.perf_counter()
                     frame = next(it)
+                    self._read_s = 0.8 * self._read_s + 0.2 * (time.perf_counter() - started)
             except StopIteration:
                 stop, looped = self._source_ended()
                 if stop:
@@ -312,7 +344,9 @@ class Player(threading.Thread):
         item = Captured(int(frame.index), float(frame.t), frame.image, time.perf_counter(),
                         getattr(frame, "depth", None))
         self.frames_read += 1
-        self.last_index = item.index
+        self.last_index, self.last_t = item.index, item.t
+        with self._cond:
+            self._demanded = False   # (a wait the consumer began before this frame: it takes this one now)
         if self.recorder is not None:
             self.recorder.write(item)
         self.out.put(item)
