@@ -34,7 +34,10 @@ HISTORY = ("Changes of 2026-12-08: with the frame scaled ahead on the side threa
            "15.1-15.4 ms (three paired runs of the threads variant, 8 s each); the first control point of a newly "
            "opened model is no longer ringed in the view until the user picks one (it was, by mistake, on every "
            "frame: a copy of the full composite and the ring drawn on it); the shipped p95 went from 51-75 ms to "
-           "36-48 ms with the keypoint work deferred (in-frame variant: 52-60 ms in the same runs).")
+           "36-48 ms with the keypoint work deferred (in-frame variant: 52-60 ms in the same runs); a recording's "
+           "next frame is read once the pipeline is done with the last (or when it must be, to be ready in time), not "
+           "beside its tracking: tracking stage 7.8-8.1 -> 7.0-7.3 ms, median latency 14.5-15.1 -> 13.4-13.8 ms "
+           "(three paired runs, threads variant).")
 
 
 def find_recording(width: int = 1280, height: int = 720) -> Path | None:
@@ -329,7 +332,8 @@ def _closing(load: float, idle: dict, head: float, gui: dict, fps_rec: float, sh
         f"the end: {gui['tracked']}. The peer processes every frame in turn, so it falls behind the "
         "recording's clock but its tracker sees small motions; the app keeps to the clock and drops frames, so "
         "its tracker sees larger jumps between the frames it gets (the tracking-time row), and the frame reader "
-        "runs in parallel: on this shared 2-core machine that costs throughput. The numbers vary by 2x or more "
+        "runs in a thread of its own (it reads the next frame once the pipeline waits for it, or when it must to "
+        "be ready in time: arapp.engine.player), which on this shared 2-core machine costs throughput. The numbers vary by 2x or more "
         "from run to run with the machine's load. Stage rows: each painted frame's latency is split into "
         "stages that add up to it, and each row gives that stage's median (the medians need not add up to the "
         "median latency). The app scales each frame as captured to the view (32-bit, straight into the shared "
