@@ -155,4 +155,6 @@ def pytest_runtest_makereport(item, call):
 
 # The real Moonraker + Klippy, started once per session for every test that asks (tests/moonraker_server.py).
 from moonraker_server import moonraker_server  # noqa: E402,F401
+# The real OctoPrint with its virtual printer, likewise (tests/octoprint_server.py).
+from octoprint_server import octoprint  # noqa: E402,F401
 

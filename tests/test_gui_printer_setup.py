@@ -14,8 +14,7 @@ import stat
 import pytest
 from test_octoprint_link import KEY as FAKE_KEY
 from test_octoprint_link import octo  # noqa: F401 - fixture
-from test_octoprint_server import KEY as REAL_KEY
-from test_octoprint_server import octoprint  # noqa: F401 - fixture
+from octoprint_server import KEY as REAL_KEY
 from virtual_printer import VirtualPrinterPty
 
 PORTS = [("/dev/ttyS0", "serial port"), ("/dev/ttyACM0", "Original Prusa i3 MK3 (Prusa Research)")]
