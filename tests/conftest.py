@@ -91,7 +91,7 @@ def pytest_sessionfinish(session, exitstatus):
 # file took (seconds, measured on the shared 2-core machine under load: relative figures); a group counts the
 # sum of its files; files not listed keep their order after them.
 FILE_SECONDS = {
-    "test_synth_recordings.py": 97, "test_prusalink_server.py": 33, "test_slam_sequences.py": 69,
+    "test_synth_recordings.py": 97, "test_prusalink_server.py": 40, "test_slam_sequences.py": 69,
     "test_realphotos.py": 45, "test_gui_print.py": 43, "test_gui.py": 43, "test_link_faults.py": 35,
     "test_moving_anchor.py": 32, "test_anchor_rejection.py": 32, "test_realvideo.py": 31, "test_link_busy.py": 30,
     "test_slam_fast_motion.py": 29, "test_link_serial.py": 26, "test_gui_scan.py": 25, "test_synth.py": 22,

@@ -32,22 +32,13 @@ REALM = "Administrator"
 # (the link's `_settled`): set shorter here, the way a fake clock stands in for a real timeout. The wait itself
 # stays: test_a_job_right_after_another_waits_for_the_end_screen meets it.
 PRINT_END_S = 2.5
-# seconds PrusaLink sleeps after it opens the printer's port, for a board that resets on opening to boot: 8 in
-# PrusaLink (its port detector's `sleep(8)` in serial_adapter, and const.PRINTER_BOOT_WAIT after a DTR reset).
-# The emulator on its pty is up at once; every test session waited the 8 s out before its first print
-BOOT_WAIT_S = 0.5
-# PrusaLink's own entry point (bin/prusalink) with those waits set first (argv[1], argv[2]); it runs in-process
+# PrusaLink's own entry point (bin/prusalink) with that one constant set first (argv[1]); it runs in-process
 LAUNCH = """\
 import sys
-import time
 import prusa.link.const as const
 const.PRINT_END_TIMEOUT = float(sys.argv.pop(1))
-const.PRINTER_BOOT_WAIT = boot = float(sys.argv.pop(1))
 import prusa.link.printer_adapter.state_manager as state_manager
 state_manager.PRINT_END_TIMEOUT = const.PRINT_END_TIMEOUT
-import prusa.link.serial.serial_adapter as serial_adapter
-serial_adapter.PRINTER_BOOT_WAIT = boot
-serial_adapter.sleep = lambda s: time.sleep(boot if s >= 8 else s)   # (the detector's boot wait is a literal)
 from prusa.link.__main__ import main
 sys.argv[0] = "prusalink"
 sys.exit(main())
@@ -117,7 +108,7 @@ class PrusaLinkServer:
                                                                    storage=self.storage))
         self._log = open(base / "prusalink.out", "w")
         # unbuffered: its log is whole when a test fails (a terminated PrusaLink leaves no buffer behind)
-        self.proc = subprocess.Popen([str(PRUSALINK.parent / "python"), "-c", LAUNCH, str(PRINT_END_S), str(BOOT_WAIT_S),
+        self.proc = subprocess.Popen([str(PRUSALINK.parent / "python"), "-c", LAUNCH, str(PRINT_END_S),
                                       "-f", "-c", str(base / "prusalink.ini")],
                                      stdout=self._log, stderr=subprocess.STDOUT, cwd=data,
                                      env={**os.environ, "PYTHONUNBUFFERED": "1"})

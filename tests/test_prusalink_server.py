@@ -188,9 +188,9 @@ def test_arapp_print_cli_through_prusalink(prusalink_server, tmp_path, capsys):
 
 
 def test_temperatures_reach_the_app(prusalink_server, tmp_path):
-    # PrusaLink turns the firmware's temperature reports on itself (M155 S2 C7), but its first try can be lost
-    # while it waits for the printer to boot, and the next comes 60 s later; the job turns them on the same way
-    # at its start instead of the test waiting a minute: PrusaLink reads the reports whoever asked for them
+    # PrusaLink turns the firmware's temperature reports on itself (M155 S2 C7), but its first try is lost while
+    # it waits 8 s for the printer to boot and the next comes 60 s later; the job turns them on the same way at
+    # its start instead of the test waiting a minute: PrusaLink reads the reports whoever asked for them
     fw = prusalink_server.firmware
     lines = ["M155 S2 C7", "M104 S215", "M140 S60"] + [f"G4 P{1200 + i}" for i in range(3)] + ["G1 X5 E0.2 F600"]
     link = link_for(prusalink_server)
