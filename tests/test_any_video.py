@@ -280,6 +280,28 @@ def test_a_variable_frame_rate_video_keeps_its_own_times(tmp_path, config_dir):
     assert [float(r.split(",")[1]) for r in rows] == pytest.approx(told, abs=1e-4)
 
 
+def test_a_plain_video_seeks_to_a_frame_with_its_own_time(config_dir):
+    """A video file is seekable as a recording is (the GUI's slider, step and loop; it played as a camera): after
+    seek(frame=k) come frame k and on, pixel for pixel and with the times a straight read gives (the VFR
+    clip's jump kept, the rule of the test above); out of range is refused in one line."""
+    from tracking.errors import SourceError
+    from tracking.sources import open_source
+
+    video = Path(__file__).resolve().parent / "data" / "videos" / "tiny_vfr.mp4"
+    told = [n / 30 + (0.3 if n >= 6 else 0.0) for n in range(12)]
+    with open_source(str(video)) as src:
+        assert src.seekable and src.frame_count == 12
+        straight = [(f.index, f.t, f.image.copy()) for f in src]
+        for k in (7, 2, 11, 0):
+            assert src.seek(frame=k) == k
+            again = [(f.index, f.t, f.image) for f in src]
+            assert [i for i, _, _ in again] == list(range(k, 12))
+            assert [t for _, t, _ in again] == pytest.approx(told[k:], abs=1e-6)
+            assert all(np.array_equal(a[2], b[2]) for a, b in zip(again, straight[k:]))
+        with pytest.raises(SourceError, match="frames 0..11"):
+            src.seek(frame=12)
+
+
 def _turn_pixels(uv, width, height, turns):
     """Pixel positions after cv2.rotate(ROTATE_90_CLOCKWISE) `turns` times of a width x height image (the rule
     of a clockwise turn: (u, v) -> (h - 1 - v, u), the height becoming the width)."""
