@@ -165,6 +165,20 @@ def codec_name(cap: cv2.VideoCapture) -> str:
     return f"{name}, '{text}'" if name else f"'{text}'"
 
 
+def _seek_capture(cap: cv2.VideoCapture, path: Path, i: int) -> tuple[cv2.VideoCapture, bool]:
+    """(`cap` placed before frame i, whether it got there): by position, checked, else a capture of `path`
+    reopened and decoded forward (OpenCV's seek in some files lands elsewhere); False when the file ends first."""
+    cap.set(cv2.CAP_PROP_POS_FRAMES, i)
+    if int(cap.get(cv2.CAP_PROP_POS_FRAMES)) == i:
+        return cap, True
+    cap.release()
+    cap = _open_capture(path)
+    for _ in range(i):
+        if not cap.grab():
+            return cap, False
+    return cap, True
+
+
 def _probe_first_frame(cap: cv2.VideoCapture, path: Path) -> np.ndarray:
     ok, img = cap.read()
     if not ok or img is None:

@@ -18,7 +18,7 @@ from tracking.recording import depth_stream
 from tracking.errors import SessionError, SourceError
 from tracking.recording.schema import Session, load_session
 
-from .base import Frame, Source, SourceWarning, _as_bgr, _open_capture, _probe_first_frame
+from .base import Frame, Source, SourceWarning, _as_bgr, _open_capture, _probe_first_frame, _seek_capture
 
 # Some containers (MKV/FFV1) give an estimated frame count; a difference this small is not reported.
 FRAME_COUNT_SLACK = 1
@@ -174,13 +174,9 @@ class RecordingSource(Source):
             return img
         self._first_img = None
         if i != self._pos:
-            self._cap.set(cv2.CAP_PROP_POS_FRAMES, i)
-            if int(self._cap.get(cv2.CAP_PROP_POS_FRAMES)) != i:  # inexact seek: reopen, decode forward
-                self._cap.release()
-                self._cap = _open_capture(self.video_path)
-                for _ in range(i):
-                    if not self._cap.grab():
-                        return None
+            self._cap, ok = _seek_capture(self._cap, self.video_path, i)
+            if not ok:
+                return None
             self._pos = i
         ok, img = self._cap.read()
         if not ok or img is None:

@@ -13,7 +13,7 @@ import cv2
 from tracking.camera import Camera
 from tracking.errors import SourceError
 
-from .base import Frame, Source, _as_bgr, _calibrated, _open_capture, _probe_first_frame
+from .base import Frame, Source, _as_bgr, _calibrated, _open_capture, _probe_first_frame, _seek_capture
 
 
 class VideoFileSource(Source):
@@ -69,15 +69,10 @@ class VideoFileSource(Source):
         """Put the capture before frame i: by position, checked, else reopened and decoded forward."""
         if i == self._pos:
             return True
-        self._cap.set(cv2.CAP_PROP_POS_FRAMES, i)
-        if int(self._cap.get(cv2.CAP_PROP_POS_FRAMES)) != i:
-            self._cap.release()
-            self._cap = _open_capture(self.path)
-            for _ in range(i):
-                if not self._cap.grab():
-                    return False
-        self._pos = i
-        return True
+        self._cap, ok = _seek_capture(self._cap, self.path, i)
+        if ok:
+            self._pos = i
+        return ok
 
     def _frames(self) -> Iterator[Frame]:
         i, t = self._next, -1.0
