@@ -76,7 +76,10 @@ def octoprint(tmp_path_factory):
                           json={"command": "connect", "port": "VIRTUAL", "baudrate": 115200})
         assert r.status_code == 204, r.text
         deadline = time.monotonic() + 30
-        while requests.get(url + "/api/connection", headers=headers, timeout=5).json()["current"]["state"] != "Operational":
+        def state():
+            return requests.get(url + "/api/connection", headers=headers, timeout=5).json()["current"]["state"]
+
+        while state() != "Operational":
             assert time.monotonic() < deadline, "the virtual printer did not become operational"
             time.sleep(0.2)
         yield url

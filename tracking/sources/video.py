@@ -61,7 +61,8 @@ class VideoFileSource(Source):
         if t is not None:
             frame = int(round(t * self.fps))
         if not 0 <= frame < self.frame_count:
-            raise SourceError(f"{self.describe()}: cannot seek to frame {frame}; it has frames 0..{self.frame_count - 1}")
+            raise SourceError(f"{self.describe()}: cannot seek to frame {frame}; "
+                              f"it has frames 0..{self.frame_count - 1}")
         self._next = int(frame)
         return self._next
 
